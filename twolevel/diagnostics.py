@@ -1,0 +1,290 @@
+"""Diagnostics: positions, codes, severities and their renderers.
+
+Every stage of twolevel (parsing, type checking, YAML validation, encoding, simulation) reports
+problems as :class:`Diagnostic` values; only the CLI decides what they mean for the exit code.
+One serialised form (:meth:`Diagnostic.to_dict`) feeds every output format.
+
+Codes carry their stage: ``STL1xx`` syntax, ``STL2xx`` types and signals, ``STL3xx`` style and
+portability, ``YML4xx`` maps and scenarios, ``MIL5xx`` encoding and solving, ``SIM6xx``
+simulation. A code is declared once, where its stage lives, with :class:`Code`; declaring it
+registers it in :data:`REGISTRY`.
+
+This module is imported by ``twolevel check``: it must stay free of heavy imports.
+"""
+
+from __future__ import annotations
+
+import enum
+import json
+from dataclasses import dataclass
+from typing import Iterable, Mapping
+
+__all__ = [
+    "Severity",
+    "Span",
+    "Diagnostic",
+    "Code",
+    "REGISTRY",
+    "sort_key",
+    "render",
+    "render_full",
+    "render_concise",
+    "render_json",
+    "render_github",
+    "render_sarif",
+    "FORMATS",
+]
+
+
+class Severity(str, enum.Enum):
+    """How bad a finding is. Errors fail a check; warnings fail it only under ``--strict``."""
+
+    ERROR = "error"
+    WARNING = "warning"
+    INFO = "info"
+
+
+@dataclass(frozen=True, order=True)
+class Span:
+    """A region of a source file. Lines and columns are 1-based; the end is inclusive of the
+    last character's column + 1 (half-open, like most editors)."""
+
+    file: str
+    line: int = 1
+    column: int = 1
+    end_line: int = 0
+    end_column: int = 0
+
+    def __post_init__(self) -> None:
+        if self.end_line < self.line or (self.end_line == self.line and self.end_column < self.column):
+            object.__setattr__(self, "end_line", self.line)
+            object.__setattr__(self, "end_column", self.column)
+
+    @classmethod
+    def whole_file(cls, file: str) -> "Span":
+        """The span used for findings about a file as a whole (unreadable, empty, …)."""
+        return cls(file, 1, 1, 1, 1)
+
+    def to(self, other: "Span") -> "Span":
+        """The span from the start of ``self`` to the end of ``other``."""
+        return Span(self.file, self.line, self.column, other.end_line, other.end_column)
+
+    def __str__(self) -> str:
+        return f"{self.file}:{self.line}:{self.column}"
+
+
+@dataclass(frozen=True)
+class Diagnostic:
+    """One finding: a code, how severe, what is wrong, where, and how to fix it."""
+
+    code: str
+    severity: Severity
+    message: str
+    span: Span
+    hint: str | None = None
+
+    def to_dict(self) -> dict[str, object]:
+        """The one serialised form every output format is made from."""
+        return {
+            "file": self.span.file,
+            "line": self.span.line,
+            "column": self.span.column,
+            "end_line": self.span.end_line,
+            "end_column": self.span.end_column,
+            "code": self.code,
+            "severity": self.severity.value,
+            "message": self.message,
+            "hint": self.hint,
+        }
+
+    @property
+    def is_error(self) -> bool:
+        return self.severity is Severity.ERROR
+
+
+REGISTRY: dict[str, "Code"] = {}
+
+
+@dataclass(frozen=True)
+class Code:
+    """A diagnostic code. Calling it makes a :class:`Diagnostic` with its default severity.
+
+    >>> STL999 = Code("STL999", "example", Severity.WARNING, "An example.")
+    >>> STL999("something odd", Span("a.stl", 2, 3)).code
+    'STL999'
+    """
+
+    id: str
+    name: str
+    severity: Severity
+    summary: str
+
+    def __post_init__(self) -> None:
+        known = REGISTRY.get(self.id)
+        if known is not None and known != self:
+            raise ValueError(f"diagnostic code {self.id} declared twice")
+        REGISTRY[self.id] = self
+
+    def __call__(
+        self,
+        message: str,
+        span: Span,
+        hint: str | None = None,
+        severity: Severity | None = None,
+    ) -> Diagnostic:
+        return Diagnostic(self.id, severity or self.severity, message, span, hint)
+
+
+def sort_key(d: Diagnostic) -> tuple[str, int, int, str]:
+    """Order diagnostics by file, position, then code."""
+    return (d.span.file, d.span.line, d.span.column, d.code)
+
+
+# --------------------------------------------------------------------------------------------
+# Renderers. Each takes the diagnostics (already sorted) and returns text; none prints.
+# --------------------------------------------------------------------------------------------
+
+
+def render_concise(diags: Iterable[Diagnostic]) -> str:
+    """``file:line:col: CODE message`` per line, like compilers and ruff's concise format."""
+    lines = []
+    for d in diags:
+        lines.append(f"{d.span.file}:{d.span.line}:{d.span.column}: {d.code} [{d.severity.value}] {d.message}")
+    return "\n".join(lines) + ("\n" if lines else "")
+
+
+def _source_line(sources: Mapping[str, str], file: str, line: int) -> str | None:
+    text = sources.get(file)
+    if text is None:
+        return None
+    lines = text.splitlines()
+    if 1 <= line <= len(lines):
+        src = lines[line - 1]
+        return src if len(src) <= 300 else src[:300] + "…"
+    return None
+
+
+def render_full(diags: Iterable[Diagnostic], sources: Mapping[str, str] | None = None) -> str:
+    """A multi-line block per finding with the source line and a caret under the span."""
+    sources = sources or {}
+    blocks = []
+    for d in diags:
+        out = [f"{d.span.file}:{d.span.line}:{d.span.column}: {d.severity.value}[{d.code}]: {d.message}"]
+        src = _source_line(sources, d.span.file, d.span.line)
+        if src is not None:
+            gutter = f"{d.span.line:>5} | "
+            out.append(gutter + src)
+            start = max(d.span.column - 1, 0)
+            if d.span.end_line == d.span.line and d.span.end_column > d.span.column:
+                width = d.span.end_column - d.span.column
+            else:
+                width = 1
+            width = max(1, min(width, max(len(src) - start, 1)))
+            out.append(" " * (len(gutter) - 2) + "| " + " " * min(start, len(src)) + "^" * width)
+        if d.hint:
+            out.append(f"      = hint: {d.hint}")
+        blocks.append("\n".join(out))
+    return "\n\n".join(blocks) + ("\n" if blocks else "")
+
+
+def render_json(diags: Iterable[Diagnostic], files_checked: int = 0, **extra: object) -> str:
+    """``{"diagnostics": [...], "files_checked": N}``; lines and columns 1-based."""
+    payload: dict[str, object] = {"diagnostics": [d.to_dict() for d in diags], "files_checked": files_checked}
+    payload.update(extra)
+    return json.dumps(payload, indent=2) + "\n"
+
+
+def _gh_escape(text: str, prop: bool = False) -> str:
+    text = text.replace("%", "%25").replace("\r", "%0D").replace("\n", "%0A")
+    if prop:
+        text = text.replace(":", "%3A").replace(",", "%2C")
+    return text
+
+
+def render_github(diags: Iterable[Diagnostic]) -> str:
+    """GitHub Actions workflow commands: ``::error file=…,line=…,col=…::CODE message``."""
+    lines = []
+    for d in diags:
+        level = {"error": "error", "warning": "warning"}.get(d.severity.value, "notice")
+        msg = f"{d.code} {d.message}" + (f" (hint: {d.hint})" if d.hint else "")
+        lines.append(
+            f"::{level} file={_gh_escape(d.span.file, True)},line={d.span.line},col={d.span.column},"
+            f"endLine={d.span.end_line},endColumn={d.span.end_column},title={_gh_escape(d.code, True)}::"
+            f"{_gh_escape(msg)}"
+        )
+    return "\n".join(lines) + ("\n" if lines else "")
+
+
+def render_sarif(diags: Iterable[Diagnostic], tool_version: str = "0") -> str:
+    """SARIF 2.1.0, one run, one rule per code used."""
+    diags = list(diags)
+    used = sorted({d.code for d in diags})
+    rules = []
+    for code in used:
+        info = REGISTRY.get(code)
+        rules.append(
+            {
+                "id": code,
+                "name": info.name if info else code,
+                "shortDescription": {"text": info.summary if info else code},
+            }
+        )
+    level = {"error": "error", "warning": "warning", "info": "note"}
+    results = []
+    for d in diags:
+        result: dict[str, object] = {
+            "ruleId": d.code,
+            "level": level[d.severity.value],
+            "message": {"text": d.message + (f" (hint: {d.hint})" if d.hint else "")},
+            "locations": [
+                {
+                    "physicalLocation": {
+                        "artifactLocation": {"uri": d.span.file},
+                        "region": {
+                            "startLine": d.span.line,
+                            "startColumn": d.span.column,
+                            "endLine": d.span.end_line,
+                            "endColumn": max(d.span.end_column, d.span.column),
+                        },
+                    }
+                }
+            ],
+        }
+        results.append(result)
+    doc = {
+        "$schema": "https://json.schemastore.org/sarif-2.1.0.json",
+        "version": "2.1.0",
+        "runs": [
+            {
+                "tool": {"driver": {"name": "twolevel", "version": tool_version, "rules": rules}},
+                "results": results,
+            }
+        ],
+    }
+    return json.dumps(doc, indent=2) + "\n"
+
+
+FORMATS = ("full", "concise", "json", "github", "sarif")
+
+
+def render(
+    fmt: str,
+    diags: Iterable[Diagnostic],
+    *,
+    sources: Mapping[str, str] | None = None,
+    files_checked: int = 0,
+    tool_version: str = "0",
+) -> str:
+    """Render ``diags`` in one of :data:`FORMATS`."""
+    diags = sorted(diags, key=sort_key)
+    if fmt == "full":
+        return render_full(diags, sources)
+    if fmt == "concise":
+        return render_concise(diags)
+    if fmt == "json":
+        return render_json(diags, files_checked)
+    if fmt == "github":
+        return render_github(diags)
+    if fmt == "sarif":
+        return render_sarif(diags, tool_version)
+    raise ValueError(f"unknown output format {fmt!r}; expected one of {', '.join(FORMATS)}")

@@ -1,0 +1,275 @@
+"""The typed syntax tree of STL rule files.
+
+Frozen dataclasses; every node carries the :class:`~twolevel.diagnostics.Span` it was parsed
+from. Spans do not take part in equality, so ``parse(print(ast)) == ast`` compares meaning.
+
+Two kinds of nodes:
+
+* **terms** (real-valued): :class:`Num`, :class:`Var`, :class:`Neg`, :class:`Arith`, :class:`Abs`;
+* **formulas** (robustness-valued): :class:`Compare`, :class:`BoolConst`, :class:`Not`,
+  :class:`Binary`, :class:`Temporal`, :class:`BinTemporal`, :class:`Edge`, :class:`Call`
+  (built-in world predicates such as ``collision_free(d)``), and :class:`Var` used as a formula
+  (a reference to an earlier named rule or a signal, whose value is its robustness, as in RTAMT).
+
+Time intervals are stored in seconds. Time is discrete: an interval ``[a, b]`` covers the
+samples ``round(a/dt) .. round(b/dt)``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Iterator, Literal, Union
+
+from twolevel.diagnostics import Span
+
+ArithOp = Literal["+", "-", "*", "/"]
+CompareOp = Literal["<", "<=", ">", ">=", "==", "!=="]
+BoolOp = Literal["and", "or", "implies", "iff", "xor"]
+UnaryTemporalOp = Literal["always", "eventually", "historically", "once", "next", "prev"]
+BinaryTemporalOp = Literal["until", "unless", "since"]
+EdgeOp = Literal["rise", "fall"]
+
+FUTURE_OPS = frozenset({"always", "eventually", "next", "until", "unless"})
+PAST_OPS = frozenset({"historically", "once", "prev", "since"})
+
+
+@dataclass(frozen=True)
+class Node:
+    """Base of every node: its source span (ignored by ``==`` and ``hash``)."""
+
+    span: Span | None = field(default=None, compare=False, repr=False, kw_only=True)
+
+    def children(self) -> tuple["Node", ...]:
+        return ()
+
+    def walk(self) -> Iterator["Node"]:
+        """Every node of this subtree, parents before children (iterative: safe on deep trees)."""
+        stack: list[Node] = [self]
+        while stack:
+            node = stack.pop()
+            yield node
+            stack.extend(reversed(node.children()))
+
+
+# ----------------------------------------------------------------------------- terms
+
+
+@dataclass(frozen=True)
+class Num(Node):
+    """A numeric literal."""
+
+    value: float
+
+
+@dataclass(frozen=True)
+class Var(Node):
+    """A named signal, constant, or (as a formula) an earlier rule."""
+
+    name: str
+
+
+@dataclass(frozen=True)
+class Neg(Node):
+    """Arithmetic negation ``-t``."""
+
+    operand: "Term"
+
+    def children(self) -> tuple[Node, ...]:
+        return (self.operand,)
+
+
+@dataclass(frozen=True)
+class Arith(Node):
+    """``left op right`` for ``+ - * /``."""
+
+    op: ArithOp
+    left: "Term"
+    right: "Term"
+
+    def children(self) -> tuple[Node, ...]:
+        return (self.left, self.right)
+
+
+@dataclass(frozen=True)
+class Abs(Node):
+    """``abs(t)``."""
+
+    operand: "Term"
+
+    def children(self) -> tuple[Node, ...]:
+        return (self.operand,)
+
+
+Term = Union[Num, Var, Neg, Arith, Abs]
+
+# ----------------------------------------------------------------------------- formulas
+
+
+@dataclass(frozen=True)
+class Interval(Node):
+    """A closed time window ``[lo, hi]`` in seconds; ``hi`` may be ``math.inf``.
+
+    ``unit`` records how the source wrote it ("s", "ms" or "" for a bare number) so the printer
+    can write it back the same way; it does not take part in equality.
+    """
+
+    lo: float
+    hi: float
+    unit: str = field(default="", compare=False)
+
+    @property
+    def bounded(self) -> bool:
+        return math.isfinite(self.hi)
+
+    def steps(self, dt: float) -> tuple[int, int | None]:
+        """The window in samples of period ``dt`` [s]; ``None`` for an unbounded end."""
+        lo = int(round(self.lo / dt))
+        hi = int(round(self.hi / dt)) if self.bounded else None
+        return lo, hi
+
+
+@dataclass(frozen=True)
+class Compare(Node):
+    """A predicate ``left op right``. Robustness: ``right - left`` for ``<``/``<=``,
+    ``left - right`` for ``>``/``>=``, ``-|left - right|`` for ``==``, ``|left - right|`` for ``!==``."""
+
+    op: CompareOp
+    left: Term
+    right: Term
+
+    def children(self) -> tuple[Node, ...]:
+        return (self.left, self.right)
+
+
+@dataclass(frozen=True)
+class BoolConst(Node):
+    """``true`` (robustness +inf) or ``false`` (robustness -inf)."""
+
+    value: bool
+
+
+@dataclass(frozen=True)
+class Not(Node):
+    operand: "Formula"
+
+    def children(self) -> tuple[Node, ...]:
+        return (self.operand,)
+
+
+@dataclass(frozen=True)
+class Binary(Node):
+    """Boolean connectives: ``and`` (min), ``or`` (max), ``implies``, ``iff``, ``xor``."""
+
+    op: BoolOp
+    left: "Formula"
+    right: "Formula"
+
+    def children(self) -> tuple[Node, ...]:
+        return (self.left, self.right)
+
+
+@dataclass(frozen=True)
+class Temporal(Node):
+    """Unary temporal operators. ``interval`` is ``None`` for the unbounded forms and always
+    ``None`` for ``next``/``prev`` (one sample)."""
+
+    op: UnaryTemporalOp
+    interval: Interval | None
+    operand: "Formula"
+
+    def children(self) -> tuple[Node, ...]:
+        return (self.operand,) if self.interval is None else (self.interval, self.operand)
+
+
+@dataclass(frozen=True)
+class BinTemporal(Node):
+    """``left until[a,b] right``, ``left unless[a,b] right``, ``left since[a,b] right``."""
+
+    op: BinaryTemporalOp
+    interval: Interval | None
+    left: "Formula"
+    right: "Formula"
+
+    def children(self) -> tuple[Node, ...]:
+        base: tuple[Node, ...] = (self.left, self.right)
+        return base if self.interval is None else (self.interval,) + base
+
+
+@dataclass(frozen=True)
+class Edge(Node):
+    """``rise(phi)``: min(phi[t], -phi[t-1]); ``fall(phi)``: min(-phi[t], phi[t-1])."""
+
+    op: EdgeOp
+    operand: "Formula"
+
+    def children(self) -> tuple[Node, ...]:
+        return (self.operand,)
+
+
+@dataclass(frozen=True)
+class Call(Node):
+    """A built-in world predicate, e.g. ``collision_free(d)``; its meaning depends on the level
+    (design.md, "The rule language")."""
+
+    name: str
+    args: tuple[Term, ...]
+
+    def children(self) -> tuple[Node, ...]:
+        return self.args
+
+
+Formula = Union[Compare, BoolConst, Not, Binary, Temporal, BinTemporal, Edge, Call, Var]
+
+# ----------------------------------------------------------------------------- file level
+
+DeclKind = Literal["input", "output", "const"]
+
+
+@dataclass(frozen=True)
+class Declaration(Node):
+    """``input float v``, ``output float out``, ``const float eps = 0.1``."""
+
+    kind: DeclKind
+    type: str
+    name: str
+    value: Term | None = None
+
+    def children(self) -> tuple[Node, ...]:
+        return () if self.value is None else (self.value,)
+
+
+@dataclass(frozen=True)
+class Rule(Node):
+    """A named formula statement ``name = formula;``. ``name_span`` locates the name."""
+
+    name: str
+    formula: Formula
+    name_span: Span | None = field(default=None, compare=False, repr=False)
+
+    def children(self) -> tuple[Node, ...]:
+        return (self.formula,)
+
+
+@dataclass(frozen=True)
+class RuleFile(Node):
+    """A parsed rule file: its declarations and rules, in source order."""
+
+    path: str = field(compare=False)
+    declarations: tuple[Declaration, ...] = ()
+    rules: tuple[Rule, ...] = ()
+
+    def children(self) -> tuple[Node, ...]:
+        return self.declarations + self.rules
+
+    def declaration(self, name: str) -> Declaration | None:
+        for d in self.declarations:
+            if d.name == name:
+                return d
+        return None
+
+    def rule(self, name: str) -> Rule | None:
+        for r in self.rules:
+            if r.name == name:
+                return r
+        return None
