@@ -1,0 +1,95 @@
+"""The diagnostics core: one serialised form feeding every output format."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from twolevel.diagnostics import REGISTRY, Code, Diagnostic, Severity, Span, render, sort_key
+
+TST901 = Code("TST901", "test-error", Severity.ERROR, "An error used by the renderer tests.")
+TST902 = Code("TST902", "test-warning", Severity.WARNING, "A warning used by the renderer tests.")
+
+SOURCE = "input float v\nspeed = always[0:1] (v <= 30);\n"
+
+
+def _diags() -> list[Diagnostic]:
+    return [
+        TST902("odd, with a comma, and: colon", Span("b.stl", 2, 9, 2, 20)),
+        TST901("undeclared signal 'vx'", Span("a.stl", 2, 22, 2, 24), hint="did you mean 'v'?"),
+    ]
+
+
+def test_code_call_makes_a_diagnostic_with_default_severity() -> None:
+    d = TST901("m", Span("f", 3, 4, 3, 9))
+    assert (d.code, d.severity, d.message, d.span.line, d.span.column) == ("TST901", Severity.ERROR, "m", 3, 4)
+    assert REGISTRY["TST901"] is TST901
+
+
+def test_redeclaring_a_code_differently_is_refused() -> None:
+    with pytest.raises(ValueError):
+        Code("TST901", "other-name", Severity.INFO, "different")
+
+
+def test_span_end_never_precedes_start() -> None:
+    s = Span("f", 5, 7)
+    assert (s.end_line, s.end_column) == (5, 7)
+    assert Span("f", 1, 1, 2, 3).to(Span("f", 4, 1, 4, 9)) == Span("f", 1, 1, 4, 9)
+
+
+def test_json_has_the_documented_shape_sorted_by_file() -> None:
+    payload = json.loads(render("json", _diags(), files_checked=2))
+    assert payload["files_checked"] == 2
+    first = payload["diagnostics"][0]
+    assert set(first) == {"file", "line", "column", "end_line", "end_column", "code", "severity", "message", "hint"}
+    assert [d["file"] for d in payload["diagnostics"]] == ["a.stl", "b.stl"]
+    assert first["line"] == 2 and first["column"] == 22 and first["hint"] == "did you mean 'v'?"
+
+
+def test_concise_is_one_line_per_finding() -> None:
+    lines = render("concise", _diags()).splitlines()
+    assert lines == [
+        "a.stl:2:22: TST901 [error] undeclared signal 'vx'",
+        "b.stl:2:9: TST902 [warning] odd, with a comma, and: colon",
+    ]
+
+
+def test_full_shows_the_source_line_and_a_caret_under_the_span() -> None:
+    text = render("full", _diags()[1:], sources={"a.stl": SOURCE})
+    lines = text.splitlines()
+    assert lines[0] == "a.stl:2:22: error[TST901]: undeclared signal 'vx'"
+    assert lines[1].endswith(SOURCE.splitlines()[1])
+    caret = lines[2]
+    # the caret sits under columns 22..23 of the source line
+    offset = lines[1].index("speed")
+    assert caret.index("^") - offset == 21 and caret.count("^") == 2
+    assert "hint: did you mean 'v'?" in lines[3]
+
+
+def test_github_escapes_property_separators_and_newlines() -> None:
+    d = TST902("line1\nline2, 100%", Span("dir:x,y.stl", 1, 2, 1, 3))
+    out = render("github", [d]).strip()
+    assert out.startswith("::warning file=dir%3Ax%2Cy.stl,line=1,col=2,")
+    assert out.endswith("::TST902 line1%0Aline2, 100%25")
+
+
+def test_sarif_lists_each_used_rule_once_with_regions() -> None:
+    doc = json.loads(render("sarif", _diags() + _diags()))
+    run = doc["runs"][0]
+    assert doc["version"] == "2.1.0"
+    assert sorted(r["id"] for r in run["tool"]["driver"]["rules"]) == ["TST901", "TST902"]
+    assert len(run["results"]) == 4
+    region = run["results"][0]["locations"][0]["physicalLocation"]["region"]
+    assert region == {"startLine": 2, "startColumn": 22, "endLine": 2, "endColumn": 24}
+    assert {r["level"] for r in run["results"]} == {"error", "warning"}
+
+
+def test_unknown_format_is_refused() -> None:
+    with pytest.raises(ValueError):
+        render("xml", [])
+
+
+def test_sort_key_orders_by_file_then_position() -> None:
+    ds = sorted(_diags(), key=sort_key)
+    assert [d.span.file for d in ds] == ["a.stl", "b.stl"]

@@ -1,0 +1,5 @@
+"""``python -m twolevel`` is the ``twolevel`` command."""
+
+from twolevel.cli import main
+
+main()

@@ -1,0 +1,145 @@
+"""The ``twolevel`` command line. The only module that imports typer and rich.
+
+Exit codes (every command):
+
+* 0 — clean: no finding that fails, every monitored rule satisfied;
+* 1 — findings that fail (errors; warnings too under ``--strict``), or a monitored rule violated;
+* 2 — usage error, unreadable input, or an internal error (reported, never a traceback).
+"""
+
+from __future__ import annotations
+
+import enum
+import os
+import sys
+from typing import List, Optional
+
+import typer
+
+from twolevel import __version__
+
+app = typer.Typer(
+    name="twolevel",
+    help="Provably-correct two-level control for autonomous driving from STL traffic rules.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    rich_markup_mode=None,
+)
+
+EXIT_OK, EXIT_FAIL, EXIT_USAGE = 0, 1, 2
+
+
+class OutputFormat(str, enum.Enum):
+    full = "full"
+    concise = "concise"
+    json = "json"
+    github = "github"
+    sarif = "sarif"
+
+
+class MonitorFormat(str, enum.Enum):
+    table = "table"
+    json = "json"
+
+
+def _console(stderr: bool = False):  # noqa: ANN202 - rich is imported lazily
+    from rich.console import Console
+
+    return Console(stderr=stderr, highlight=False, soft_wrap=True)
+
+
+def _default_format() -> OutputFormat:
+    if os.environ.get("GITHUB_ACTIONS") == "true":
+        return OutputFormat.github
+    return OutputFormat.full if sys.stdout.isatty() else OutputFormat.concise
+
+
+def _emit(text: str) -> None:
+    """Write plain text to stdout (machine formats must not pass through rich's markup)."""
+    sys.stdout.write(text)
+    sys.stdout.flush()
+
+
+def _print_full(text: str) -> None:
+    """Colour the severities of the ``full`` format on a terminal; plain otherwise."""
+    if not sys.stdout.isatty():
+        _emit(text)
+        return
+    from rich.text import Text
+
+    console = _console()
+    for line in text.splitlines():
+        t = Text(line)
+        t.highlight_regex(r"error\[[A-Z]+\d+\]", "bold red")
+        t.highlight_regex(r"warning\[[A-Z]+\d+\]", "bold yellow")
+        t.highlight_regex(r"info\[[A-Z]+\d+\]", "bold cyan")
+        t.highlight_regex(r"^\s+\|\s+\^+$", "bold red")
+        t.highlight_regex(r"= hint:.*$", "green")
+        console.print(t)
+
+
+def _version_callback(value: bool) -> None:
+    if value:
+        _emit(f"twolevel {__version__}\n")
+        raise typer.Exit(EXIT_OK)
+
+
+@app.callback()
+def _root(
+    version: bool = typer.Option(False, "--version", callback=_version_callback, is_eager=True, help="Print the version and exit."),
+) -> None:
+    """twolevel: check rules, plan, simulate, monitor and report."""
+
+
+@app.command()
+def check(
+    paths: List[str] = typer.Argument(..., help="Rule files (.stl), maps and scenarios (.yaml), or folders holding them."),
+    output_format: Optional[OutputFormat] = typer.Option(
+        None, "--output-format", "-f", help="full (default on a terminal), concise, json, github (default under GitHub Actions), sarif."
+    ),
+    strict: bool = typer.Option(False, "--strict", help="Warnings fail the check too."),
+    exit_zero: bool = typer.Option(False, "--exit-zero", help="Always exit 0 (report only)."),
+    dt: Optional[float] = typer.Option(None, "--dt", min=1e-9, help="Sample period [s]: intervals must be multiples of it."),
+    horizon: Optional[int] = typer.Option(None, "--horizon", min=1, help="MPC horizon [steps]: longer formulas are reported (needs --dt)."),
+) -> None:
+    """Check rule files, maps and scenarios without solving anything.
+
+    Exit 0 when clean, 1 on errors (and warnings under --strict), 2 when an input cannot be read.
+    """
+    from twolevel import pipeline
+    from twolevel.diagnostics import render
+
+    fmt = output_format or _default_format()
+    result = pipeline.check(paths, dt=dt, horizon=horizon)
+    text = render(fmt.value, result.diagnostics, sources=result.sources, files_checked=result.files_checked, tool_version=__version__)
+    if fmt is OutputFormat.full:
+        _print_full(text)
+        n_err = sum(d.is_error for d in result.diagnostics)
+        n_warn = sum(d.severity.value == "warning" for d in result.diagnostics)
+        summary = f"{result.files_checked} file(s) checked: {n_err} error(s), {n_warn} warning(s)\n"
+        (_console().print(summary, end="") if sys.stdout.isatty() else _emit(summary))
+    else:
+        _emit(text)
+    if result.unreadable and not exit_zero:
+        raise typer.Exit(EXIT_USAGE)
+    raise typer.Exit(pipeline.exit_code(result.diagnostics, strict=strict, exit_zero=exit_zero))
+
+
+def main() -> None:
+    """Console-script entry point: never let a Python traceback reach the user."""
+    try:
+        app()
+    except SystemExit:
+        raise
+    except KeyboardInterrupt:
+        sys.stderr.write("interrupted\n")
+        sys.exit(130)
+    except Exception as exc:  # pragma: no cover - the last line of defence
+        sys.stderr.write(f"twolevel: internal error: {type(exc).__name__}: {exc}\n")
+        sys.stderr.write("This is a bug in twolevel; please report it with the command you ran.\n")
+        sys.exit(EXIT_USAGE)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

@@ -1,0 +1,141 @@
+"""The stages of twolevel as plain functions returning values and diagnostics.
+
+``check`` (rules, maps, scenarios; no solving) and ``monitor`` (rules over a recorded trace) live
+here; the CLI only chooses output formats and exit codes. Heavy modules are imported inside the
+functions that need them, so ``twolevel check`` never loads numpy or a solver.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterable, Mapping, Sequence
+
+from twolevel.diagnostics import Code, Diagnostic, Severity, Span
+
+RULE_SUFFIXES = (".stl",)
+YAML_SUFFIXES = (".yaml", ".yml")
+
+CLI001 = Code("CLI001", "path-not-found", Severity.ERROR, "A path given on the command line does not exist.")
+CLI002 = Code("CLI002", "unsupported-file", Severity.ERROR, "A file given on the command line is of no kind twolevel checks.")
+CLI003 = Code("CLI003", "nothing-to-check", Severity.WARNING, "A folder given on the command line holds no rule, map or scenario file.")
+
+#: Codes meaning "the input could not be read at all"; the CLI exits 2 on them (usage error).
+UNREADABLE_CODES: frozenset[str] = frozenset({"CLI001", "CLI002"})
+
+
+@dataclass(frozen=True)
+class CheckResult:
+    """What ``check`` found: the diagnostics, how many files it read, and their text (for
+    rendering source lines under a finding)."""
+
+    diagnostics: tuple[Diagnostic, ...]
+    files_checked: int
+    sources: Mapping[str, str] = field(default_factory=dict)
+
+    @property
+    def unreadable(self) -> bool:
+        """True when some input could not be read at all (exit code 2)."""
+        codes = UNREADABLE_CODES | _unreadable_codes("twolevel.stl.codes") | _unreadable_codes("twolevel.world.codes")
+        return any(d.code in codes for d in self.diagnostics)
+
+
+def _unreadable_codes(module: str) -> frozenset[str]:
+    """The codes a stage declares for files it could not read at all (its ``UNREADABLE``)."""
+    import importlib
+
+    try:
+        return frozenset(getattr(importlib.import_module(module), "UNREADABLE", frozenset()))
+    except ImportError:
+        return frozenset()
+
+
+def collect_paths(paths: Sequence[str]) -> tuple[list[str], list[Diagnostic]]:
+    """Expand folders into the rule, map and scenario files below them, sorted; keep files as
+    given. Hidden folders and virtual environments are skipped."""
+    files: list[str] = []
+    diags: list[Diagnostic] = []
+    for raw in paths:
+        p = Path(raw)
+        if p.is_dir():
+            found = []
+            for root, dirs, names in os.walk(p):
+                dirs[:] = sorted(d for d in dirs if not d.startswith(".") and d not in ("__pycache__", "node_modules"))
+                for name in sorted(names):
+                    if name.endswith(RULE_SUFFIXES + YAML_SUFFIXES):
+                        found.append(os.path.join(root, name))
+            if not found:
+                diags.append(CLI003(f"no .stl, .yaml or .yml file below '{raw}'", Span.whole_file(raw)))
+            files.extend(found)
+        elif p.exists():
+            if not raw.endswith(RULE_SUFFIXES + YAML_SUFFIXES):
+                diags.append(
+                    CLI002(
+                        f"'{raw}' is not a rule file (.stl) or a map/scenario (.yaml, .yml)",
+                        Span.whole_file(raw),
+                        hint="pass rule files, maps, scenarios or folders holding them",
+                    )
+                )
+            else:
+                files.append(raw)
+        else:
+            diags.append(CLI001(f"no such file or folder: '{raw}'", Span.whole_file(raw)))
+    # a file named twice (directly and through its folder) is checked once
+    seen: set[str] = set()
+    unique = [f for f in files if not (os.path.normpath(f) in seen or seen.add(os.path.normpath(f)))]
+    return unique, diags
+
+
+def check(paths: Sequence[str], *, dt: float | None = None, horizon: int | None = None) -> CheckResult:
+    """Check rule files, maps and scenarios (and, for a scenario, its map and rule files with
+    the signals its world provides). Nothing is solved or simulated.
+
+    ``dt`` [s] enables the multiple-of-dt check on intervals; with ``horizon`` [steps] too,
+    formulas whose future horizon exceeds ``horizon * dt`` are reported.
+    """
+    files, diags = collect_paths(paths)
+    sources: dict[str, str] = {}
+    for file in files:
+        if file.endswith(RULE_SUFFIXES):
+            from twolevel.stl.lint import check_file
+
+            result = check_file(file, dt=dt, horizon=horizon)
+            diags.extend(result.diagnostics)
+            if result.source is not None:
+                sources[file] = result.source
+        else:
+            from twolevel.world.loader import check_world_file
+
+            diags.extend(check_world_file(file))
+            sources.setdefault(file, _read_text_quietly(file))
+    return CheckResult(tuple(_dedupe(diags)), len(files), sources)
+
+
+def _dedupe(diags: Iterable[Diagnostic]) -> list[Diagnostic]:
+    """A rule file checked directly and through a scenario reports each finding once."""
+    seen: set[Diagnostic] = set()
+    out = []
+    for d in diags:
+        if d not in seen:
+            seen.add(d)
+            out.append(d)
+    return out
+
+
+def _read_text_quietly(path: str, limit: int = 1 << 20) -> str:
+    try:
+        if os.path.getsize(path) > limit:
+            return ""
+        with open(path, "rb") as fh:
+            return fh.read().decode("utf-8", errors="replace")
+    except OSError:
+        return ""
+
+
+def exit_code(diags: Iterable[Diagnostic], *, strict: bool = False, exit_zero: bool = False) -> int:
+    """0 clean, 1 errors (warnings too under ``strict``); ``exit_zero`` forces 0."""
+    if exit_zero:
+        return 0
+    fail = {Severity.ERROR} | ({Severity.WARNING} if strict else set())
+    return 1 if any(d.severity in fail for d in diags) else 0
