@@ -1,0 +1,255 @@
+"""The offline discrete-time robustness monitor: the reference oracle.
+
+It gives RTAMT 0.4.10's offline discrete-time semantics (``StlDiscreteTimeSpecification.
+evaluate``) for every operator of the rule language, over whole numpy arrays:
+
+* ``a <= b``/``a < b``: ``b - a``; ``>``/``>=``: ``a - b``; ``==``: ``-|a - b|``; ``!==``: ``|a - b|``;
+* ``not``: negation; ``and``/``or``: min/max; ``implies``: ``max(-l, r)``; ``iff``: ``-|l - r|``;
+  ``xor``: ``|l - r|``; ``true``/``false``: ``+inf``/``-inf``;
+* ``always[a,b]``/``eventually[a,b]`` at ``i``: min/max over samples ``i+a .. i+b`` truncated at
+  the end of the trace, ``+inf``/``-inf`` when the window is empty; unbounded: to the end;
+* ``historically``/``once``: the same over ``i-b .. i-a`` truncated at the start;
+* ``l until[a,b] r``: ``max_{m in [a,b]} min(r[i+m], min l[i .. i+m-1])``; beyond the trace
+  ``r = -inf``, ``l = +inf``; ``since`` mirrored (``l`` over ``i-m+1 .. i``);
+* ``l unless[a,b] r`` = ``always[0,b] l or (l until[a,b] r)`` (RTAMT's rewriting);
+* ``next``: ``x[i+1]``, ``+inf`` at the last sample; ``prev``: ``x[i-1]``, ``+inf`` at the first;
+* ``rise``: ``min(x[i], -x[i-1])`` with ``x[-1] = -inf``; ``fall``: ``min(-x[i], x[i-1])`` with
+  ``x[-1] = +inf``.
+
+Intervals are in seconds and cover the samples ``round(a/dt) .. round(b/dt)``.
+"""
+
+from __future__ import annotations
+
+from typing import Callable, Mapping, Sequence
+
+import numpy as np
+
+from twolevel.monitor import windows
+from twolevel.monitor.errors import MonitorError
+from twolevel.stl import ast
+
+__all__ = [
+    "Builtin",
+    "DEFAULT_BUILTINS",
+    "MonitorError",
+    "collision_free",
+    "robustness",
+    "evaluate_rules",
+]
+
+Builtin = Callable[..., np.ndarray]
+"""A world predicate: ``builtin(signals, *args) -> robustness array``; ``args`` are the evaluated
+argument terms (arrays of the trace length), ``signals`` the trace's named signals."""
+
+
+def collision_free(signals: Mapping[str, np.ndarray], d: np.ndarray) -> np.ndarray:
+    """Low-level ``collision_free(d)``: the signal ``min_gap`` (signed separation of the ego's and
+    the nearest vehicle's bounding boxes [m]) minus the required distance ``d`` [m]."""
+    gap = signals.get("min_gap")
+    if gap is None:
+        raise MonitorError("collision_free(d) needs the signal 'min_gap' (bounding-box separation [m])", "min_gap")
+    return np.asarray(gap, dtype=np.float64) - d
+
+
+DEFAULT_BUILTINS: Mapping[str, Builtin] = {"collision_free": collision_free}
+
+_INF = np.inf
+
+
+def _trace_length(signals: Mapping[str, np.ndarray], rules: Mapping[str, np.ndarray]) -> int:
+    n: int | None = None
+    first = ""
+    for group in (signals, rules):
+        for name, arr in group.items():
+            arr = np.asarray(arr)
+            if arr.ndim != 1:
+                raise MonitorError(f"signal '{name}' is not one-dimensional (shape {arr.shape})", name)
+            if n is None:
+                n, first = arr.shape[0], name
+            elif arr.shape[0] != n:
+                raise MonitorError(
+                    f"signal '{name}' has {arr.shape[0]} samples but '{first}' has {n}", name
+                )
+    if n is None:
+        raise MonitorError("cannot tell the trace length: no signals given")
+    return n
+
+
+class _Evaluator:
+    """One evaluation: signals, constants, rule results and a memo of evaluated nodes."""
+
+    def __init__(
+        self,
+        signals: Mapping[str, np.ndarray],
+        dt: float,
+        consts: Mapping[str, float],
+        rules: Mapping[str, np.ndarray],
+        builtins: Mapping[str, Builtin] | None,
+    ) -> None:
+        if not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
+            raise MonitorError(f"the sampling period dt must be a positive number of seconds, got {dt!r}", "dt")
+        self.n = _trace_length(signals, rules)
+        self.dt = float(dt)
+        self.signals = {k: np.asarray(v, dtype=np.float64) for k, v in signals.items()}
+        self.consts = consts
+        self.rules = {k: np.asarray(v, dtype=np.float64) for k, v in rules.items()}
+        self.builtins = DEFAULT_BUILTINS if builtins is None else builtins
+
+    # -- names --------------------------------------------------------------------------------
+    def lookup(self, name: str) -> np.ndarray:
+        if name in self.rules:
+            return self.rules[name]
+        if name in self.signals:
+            return self.signals[name]
+        if name in self.consts:
+            return np.full(self.n, float(self.consts[name]))
+        raise MonitorError(f"no signal, constant or earlier rule named '{name}'", name)
+
+    def steps(self, interval: ast.Interval | None) -> tuple[int, int | None]:
+        if interval is None:
+            return 0, None
+        return interval.steps(self.dt)
+
+    # -- evaluation (iterative post-order: deep formulas do not hit the recursion limit) ------
+    def run(self, root: ast.Node) -> np.ndarray:
+        memo: dict[int, np.ndarray] = {}
+        stack: list[tuple[ast.Node, bool]] = [(root, False)]
+        while stack:
+            node, ready = stack.pop()
+            if id(node) in memo:
+                continue
+            if not ready:
+                stack.append((node, True))
+                for child in node.children():
+                    if not isinstance(child, ast.Interval) and id(child) not in memo:
+                        stack.append((child, False))
+                continue
+            args = [memo[id(c)] for c in node.children() if not isinstance(c, ast.Interval)]
+            memo[id(node)] = self.apply(node, args)
+        return memo[id(root)]
+
+    def apply(self, node: ast.Node, args: list[np.ndarray]) -> np.ndarray:  # noqa: C901 - a dispatch table
+        n = self.n
+        if isinstance(node, ast.Num):
+            return np.full(n, float(node.value))
+        if isinstance(node, ast.Var):
+            return self.lookup(node.name)
+        if isinstance(node, ast.BoolConst):
+            return np.full(n, _INF if node.value else -_INF)
+        if isinstance(node, ast.Neg):
+            return -args[0]
+        if isinstance(node, ast.Abs):
+            return np.abs(args[0])
+        if isinstance(node, ast.Arith):
+            left, right = args
+            with np.errstate(all="ignore"):
+                if node.op == "+":
+                    return left + right
+                if node.op == "-":
+                    return left - right
+                if node.op == "*":
+                    return left * right
+                return left / right
+        if isinstance(node, ast.Compare):
+            left, right = args
+            with np.errstate(invalid="ignore"):
+                if node.op in ("<", "<="):
+                    return right - left
+                if node.op in (">", ">="):
+                    return left - right
+                if node.op == "==":
+                    return -np.abs(left - right)
+                return np.abs(left - right)
+        if isinstance(node, ast.Not):
+            return -args[0]
+        if isinstance(node, ast.Binary):
+            left, right = args
+            with np.errstate(invalid="ignore"):
+                if node.op == "and":
+                    return np.minimum(left, right)
+                if node.op == "or":
+                    return np.maximum(left, right)
+                if node.op == "implies":
+                    return np.maximum(-left, right)
+                if node.op == "iff":
+                    return -np.abs(left - right)
+                return np.abs(left - right)
+        if isinstance(node, ast.Temporal):
+            return self.temporal(node, args[0])
+        if isinstance(node, ast.BinTemporal):
+            return self.bin_temporal(node, args[0], args[1])
+        if isinstance(node, ast.Edge):
+            x = args[0]
+            if node.op == "rise":
+                prev = np.concatenate(([-_INF], x[:-1]))
+                return np.minimum(x, -prev)
+            prev = np.concatenate(([_INF], x[:-1]))
+            return np.minimum(prev, -x)
+        if isinstance(node, ast.Call):
+            fn = self.builtins.get(node.name)
+            if fn is None:
+                raise MonitorError(f"unknown built-in predicate '{node.name}'", node.name)
+            out = np.asarray(fn(self.signals, *args), dtype=np.float64)
+            return np.broadcast_to(out, (n,)).copy()
+        raise MonitorError(f"cannot evaluate a {type(node).__name__} node", type(node).__name__)
+
+    def temporal(self, node: ast.Temporal, x: np.ndarray) -> np.ndarray:
+        op = node.op
+        if op == "next":
+            return np.concatenate((x[1:], [_INF]))[: self.n]
+        if op == "prev":
+            return np.concatenate(([_INF], x[:-1]))[: self.n]
+        a, b = self.steps(node.interval)
+        if op == "always":
+            return windows.future_window(x, a, b, "min")
+        if op == "eventually":
+            return windows.future_window(x, a, b, "max")
+        if op == "historically":
+            return windows.past_window(x, a, b, "min")
+        return windows.past_window(x, a, b, "max")  # once
+
+    def bin_temporal(self, node: ast.BinTemporal, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+        a, b = self.steps(node.interval)
+        if node.op == "until":
+            return windows.until(left, right, a, b)
+        if node.op == "since":
+            return windows.since(left, right, a, b)
+        held = windows.future_window(left, 0, b, "min")  # unless
+        return np.maximum(held, windows.until(left, right, a, b))
+
+
+def robustness(
+    formula: ast.Node,
+    signals: Mapping[str, np.ndarray],
+    dt: float,
+    *,
+    consts: Mapping[str, float] | None = None,
+    rules: Mapping[str, np.ndarray] | None = None,
+    builtins: Mapping[str, Builtin] | None = None,
+) -> np.ndarray:
+    """The robustness of ``formula`` at every sample of the trace (float64; ``±inf`` for
+    ``true``/``false`` and empty windows, as RTAMT).
+
+    ``signals`` maps names to equally long 1-D arrays sampled every ``dt`` [s]; ``consts`` maps
+    declared constants to numbers; ``rules`` maps names of already evaluated rules to their
+    robustness; ``builtins`` replaces :data:`DEFAULT_BUILTINS`. Raises :class:`MonitorError` for
+    a missing name, unequal lengths or a bad ``dt``.
+    """
+    ev = _Evaluator(signals, dt, consts or {}, rules or {}, builtins)
+    return np.asarray(ev.run(formula), dtype=np.float64).copy()
+
+
+def evaluate_rules(
+    rules: Sequence[ast.Rule],
+    signals: Mapping[str, np.ndarray],
+    dt: float,
+    *,
+    consts: Mapping[str, float] | None = None,
+    builtins: Mapping[str, Builtin] | None = None,
+) -> dict[str, np.ndarray]:
+    """The robustness signal of every rule, in order; a later rule may name an earlier one."""
+    done: dict[str, np.ndarray] = {}
+    for rule in rules:
+        done[rule.name] = robustness(rule.formula, signals, dt, consts=consts, rules=done, builtins=builtins)
+    return done
