@@ -1,0 +1,485 @@
+"""Loading maps and scenarios: YAML → validated pydantic models, or diagnostics with positions.
+
+``load_map(path)`` and ``load_scenario(path)`` return the loaded value (or None) and every
+diagnostic found; ``check_world_file(path)`` is what ``twolevel check`` calls for a ``.yaml``
+file (for a scenario it also lints the rule files it names). A scenario refers to its map, its
+rule files and the scenario it ``extends`` by paths relative to the file that says so.
+
+Imported by ``twolevel check``: pydantic, PyYAML and the standard library only (no numpy).
+"""
+
+from __future__ import annotations
+
+import difflib
+import os
+import re
+import typing
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterable, Literal
+
+from pydantic import BaseModel, ValidationError
+
+from twolevel.diagnostics import Diagnostic, Span
+from twolevel.world.codes import (
+    YML410, YML411, YML412, YML413, YML414, YML415, YML416, YML417, YML418, YML419, YML420,
+)
+from twolevel.world.document import Document, Path_, read_document
+from twolevel.world.schema import MapFile, ScenarioFile, lane_length
+
+__all__ = ["Map", "Scenario", "RuleFile", "load_map", "load_scenario", "check_world_file", "file_kind"]
+
+
+@dataclass(frozen=True)
+class Map:
+    """A validated map and where it came from."""
+
+    spec: MapFile
+    path: str
+
+
+@dataclass(frozen=True)
+class RuleFile:
+    """A rule file named by a scenario (absolute path) and its constant bindings."""
+
+    path: str
+    constants: tuple[tuple[str, float], ...]
+    span: Span
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A validated scenario with its map resolved and its rule files located."""
+
+    spec: ScenarioFile
+    path: str
+    map: Map
+    rules: tuple[RuleFile, ...]
+
+
+Kind = Literal["map", "scenario"]
+
+
+def file_kind(data: dict[str, Any]) -> Kind | None:
+    """``kind:`` if given, else guessed from the shape (``roads`` → map; ``ego``/``route`` → scenario)."""
+    kind = data.get("kind")
+    if kind in ("map", "scenario"):
+        return kind
+    if "roads" in data:
+        return "map"
+    if "ego" in data or "route" in data or "map" in data:
+        return "scenario"
+    return None
+
+
+# ------------------------------------------------------------ pydantic errors → diagnostics
+
+_TYPE_WORDS = {
+    "float": "a number", "int": "a whole number", "bool": "true or false", "string": "text",
+    "list": "a list", "tuple": "a list", "dict": "a mapping (key: value)", "model": "a mapping (key: value)",
+    "model_attributes": "a mapping (key: value)", "none": "nothing (null)",
+}
+_RANGE = {"greater_than": ("gt", ">"), "greater_than_equal": ("ge", ">="), "less_than": ("lt", "<"),
+          "less_than_equal": ("le", "<=")}
+
+
+def _unwrap(ann: Any) -> Any:
+    args = [a for a in typing.get_args(ann) if a is not type(None)]
+    if typing.get_origin(ann) in (typing.Union, getattr(__import__("types"), "UnionType", None)) and len(args) == 1:
+        return args[0]
+    return ann
+
+
+def _model_at(root: type[BaseModel], loc: Path_) -> Any:
+    """The annotation the schema expects at ``loc`` (a model class, a list type, …) or None."""
+    ann: Any = root
+    for part in loc:
+        ann = _unwrap(ann)
+        origin = typing.get_origin(ann)
+        if isinstance(part, str) and isinstance(ann, type) and issubclass(ann, BaseModel):
+            field = ann.model_fields.get(part)
+            if field is None:
+                return None
+            ann = field.annotation
+        elif isinstance(part, int) and origin in (list, tuple):
+            ann = typing.get_args(ann)[0]
+        elif origin is dict:
+            ann = typing.get_args(ann)[1]
+        else:
+            return None
+    return _unwrap(ann)
+
+
+def _description(root: type[BaseModel], loc: Path_) -> str:
+    parent = _model_at(root, loc[:-1]) if loc else None
+    if isinstance(parent, type) and issubclass(parent, BaseModel) and loc and isinstance(loc[-1], str):
+        field = parent.model_fields.get(loc[-1])
+        if field is not None and field.description:
+            return field.description
+    return ""
+
+
+def _unit(description: str) -> str:
+    found = re.findall(r"\[([^\]]+)\]", description)
+    return f" [{found[-1]}]" if found else ""
+
+
+def _name(loc: Path_) -> str:
+    out = ""
+    for part in loc:
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+    return out or "the document"
+
+
+def _shown(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "…"
+
+
+def validation_diagnostics(exc: ValidationError, doc: Document, root: type[BaseModel]) -> list[Diagnostic]:
+    """Turn a pydantic ``ValidationError`` into YML41x diagnostics at the offending key or value."""
+    out: list[Diagnostic] = []
+    for err in exc.errors(include_url=False):
+        loc = tuple(p for p in err["loc"] if isinstance(p, (str, int)))
+        kind = err["type"]
+        desc = _description(root, loc)
+        where = _name(loc)
+        ctx = err.get("ctx") or {}
+        if kind == "extra_forbidden":
+            key = loc[-1]
+            parent = _model_at(root, loc[:-1])
+            known = list(parent.model_fields) if isinstance(parent, type) and issubclass(parent, BaseModel) else []
+            close = difflib.get_close_matches(str(key), known, n=1, cutoff=0.6)
+            hint = f"keys allowed here: {', '.join(known)}" if known else None
+            msg = f"unknown key '{key}'" + (f" — did you mean '{close[0]}'?" if close else "")
+            out.append(YML411(msg, doc.locate(loc), hint=hint))
+        elif kind == "missing":
+            key = loc[-1]
+            parent_name = _name(loc[:-1])
+            out.append(YML412(f"missing key '{key}' in {parent_name}", doc.locate(loc[:-1]),
+                              hint=f"add '{key}: …'" + (f" — {desc}" if desc else "")))
+        elif kind in _RANGE or kind in ("too_short", "too_long"):
+            if kind in _RANGE:
+                attr, sym = _RANGE[kind]
+                bound = f"{sym} {ctx.get(attr)}"
+            elif kind == "too_short":
+                bound = f"at least {ctx.get('min_length')} item(s)"
+            else:
+                bound = f"at most {ctx.get('max_length')} item(s)"
+            msg = f"'{where}' must be {bound}{_unit(desc)} (got {_shown(err.get('input'))})"
+            out.append(YML414(msg, doc.locate(loc, value=True), hint=desc or None))
+        elif kind == "literal_error":
+            msg = f"'{where}' must be {ctx.get('expected')} (got {_shown(err.get('input'))})"
+            out.append(YML415(msg, doc.locate(loc, value=True), hint=desc or None))
+        elif kind.endswith(("_type", "_parsing")) or kind in ("bool_parsing", "int_from_float", "finite_number"):
+            base = kind.rsplit("_", 1)[0] if kind != "int_from_float" else "int"
+            words = _TYPE_WORDS.get(base, base.replace("_", " "))
+            msg = f"'{where}' must be {words}{_unit(desc)} (got {_shown(err.get('input'))})"
+            out.append(YML413(msg, doc.locate(loc, value=True), hint=desc or None))
+        else:  # value_error from a model validator, and anything else
+            text = err["msg"].removeprefix("Value error, ")
+            out.append(YML415(f"{where}: {text}", doc.locate(loc), hint=desc or None))
+    return out
+
+
+# ------------------------------------------------------------------- reading with extends
+
+
+def _resolve(relative: str, span: Span) -> Path:
+    """``relative`` as written in the file of ``span``, resolved against that file's folder."""
+    return (Path(span.file).parent / relative).resolve()
+
+
+def _read_kind(path: Path, expected: Kind, referrer: Span | None,
+               stack: tuple[Path, ...] = ()) -> tuple[Document | None, list[Diagnostic]]:
+    """Read a file, check its kind, and apply ``extends`` (scenarios) with cycle detection."""
+    doc, diags = read_document(_display(path))
+    if doc is None:
+        if referrer is not None and diags and diags[0].code == "YML401":
+            return None, [YML418(f"referenced file not found: {_display(path)}", referrer,
+                                 hint="paths are relative to the file that names them")]
+        return None, diags
+    kind = file_kind(doc.data)
+    if kind != expected:
+        what = f"a {kind}" if kind else "neither a map nor a scenario"
+        span = referrer or doc.locate(("kind",))
+        return None, [YML410(f"{_display(path)} is {what}; expected a {expected}", span,
+                             hint=f"add 'kind: {expected}' at the top, or name the right file")]
+    base = doc.data.get("extends") if expected == "scenario" else None
+    if base is None:
+        return doc, []
+    if not isinstance(base, str):
+        return doc, []  # the schema reports the type
+    at = doc.locate(("extends",), value=True)
+    target = _resolve(base, at)
+    if target in stack or target == path.resolve():
+        chain = " → ".join(p.name for p in (*stack, path.resolve(), target))
+        return None, [YML419(f"'extends' forms a cycle: {chain}", at, hint="a scenario cannot extend itself")]
+    parent, pdiags = _read_kind(target, "scenario", at, stack + (path.resolve(),))
+    if parent is None:
+        return None, pdiags
+    return _merge(parent, doc), pdiags
+
+
+def _merge(base: Document, over: Document) -> Document:
+    """``over`` on top of ``base``: mappings merge key by key, anything else is replaced."""
+    where = dict(base.where)
+
+    def merge(a: Any, b: Any, path: Path_) -> Any:
+        if isinstance(a, dict) and isinstance(b, dict):
+            out = dict(a)
+            for k, v in b.items():
+                out[k] = merge(a.get(k), v, path + (k,)) if k in a else v
+                if k not in a or not (isinstance(a.get(k), dict) and isinstance(v, dict)):
+                    for p in [p for p in where if p[: len(path) + 1] == path + (k,)]:
+                        del where[p]
+                    where.update({p: w for p, w in over.where.items() if p[: len(path) + 1] == path + (k,)})
+            return out
+        return b
+
+    data = merge(base.data, over.data, ())
+    data.pop("extends", None)
+    where[()] = over.where.get((), base.where.get(()))  # type: ignore[assignment]
+    return Document(over.path, data, where)
+
+
+def _display(path: Path) -> str:
+    try:
+        rel = os.path.relpath(path)
+    except ValueError:
+        return str(path)
+    return str(path) if rel.startswith("..") else rel
+
+
+# ------------------------------------------------------------------------- cross-checks
+
+
+def _suggest(name: str, known: Iterable[str]) -> str | None:
+    close = difflib.get_close_matches(name, list(known), n=1, cutoff=0.5)
+    return f"did you mean '{close[0]}'?" if close else None
+
+
+def _check_ids(items: list[tuple[str, Path_]], doc: Document, what: str) -> list[Diagnostic]:
+    seen: dict[str, Path_] = {}
+    out = []
+    for ident, loc in items:
+        if ident in seen:
+            first = doc.locate(seen[ident], value=True)
+            out.append(YML417(f"duplicate {what} id '{ident}'", doc.locate(loc, value=True),
+                              hint=f"first defined at {first.file}:{first.line}"))
+        else:
+            seen[ident] = loc
+    return out
+
+
+def lane_lengths(spec: MapFile) -> dict[str, float]:
+    """Length [m] of every lane of the map by id (pure Python)."""
+    return {lane.id: lane_length(road, lane.offset) for road in spec.roads for lane in road.lane_specs()}
+
+
+def successors(spec: MapFile) -> dict[str, list[str]]:
+    """Lane id → ids of the lanes that follow it."""
+    return {lane.id: list(lane.successors) for road in spec.roads for lane in road.lane_specs()}
+
+
+def _check_lane_pos(lane: str, s: float | None, loc: Path_, doc: Document, lengths: dict[str, float],
+                    s_key: str = "s") -> list[Diagnostic]:
+    if lane not in lengths:
+        return [YML416(f"no lane '{lane}' in the map", doc.locate(loc + ("lane",), value=True),
+                       hint=_suggest(lane, lengths) or f"lanes: {', '.join(sorted(lengths)[:12])}")]
+    if s is not None and s > lengths[lane] + 1e-6:
+        return [YML420(f"s = {s:g} m is beyond the end of lane '{lane}' ({lengths[lane]:.1f} m long)",
+                       doc.locate(loc + (s_key,), value=True))]
+    return []
+
+
+def _check_map(spec: MapFile, doc: Document) -> list[Diagnostic]:
+    out: list[Diagnostic] = []
+    out += _check_ids([(r.id, ("roads", i, "id")) for i, r in enumerate(spec.roads)], doc, "road")
+    lanes: list[tuple[str, Path_]] = []
+    for i, road in enumerate(spec.roads):
+        if road.lanes is None:
+            lanes.append((road.id, ("roads", i, "id")))
+        else:
+            lanes += [(ln.id, ("roads", i, "lanes", j, "id")) for j, ln in enumerate(road.lanes)]
+    out += _check_ids(lanes, doc, "lane")
+    lengths = lane_lengths(spec)
+    for i, road in enumerate(spec.roads):
+        for j, lane in enumerate(road.lanes or []):
+            for k, nxt in enumerate(lane.successors):
+                if nxt not in lengths:
+                    out.append(YML416(f"no lane '{nxt}' in the map", doc.locate(("roads", i, "lanes", j, "successors", k), value=True),
+                                      hint=_suggest(nxt, lengths)))
+    items: list[tuple[str, Path_]] = []
+    for group in ("speed_limits", "stop_signs", "traffic_lights"):
+        for i, item in enumerate(getattr(spec, group)):
+            items.append((item.id, (group, i, "id")))
+            out += _check_lane_pos(item.lane, item.s, (group, i), doc, lengths)
+    out += _check_ids(items, doc, "sign or light")
+    return out
+
+
+def _route_lanes(spec: ScenarioFile, succ: dict[str, list[str]]) -> list[str] | None:
+    """The lanes from A's to B's: ``via`` if given, else a shortest path by successors."""
+    a, b = spec.route.start.lane, spec.route.goal.lane
+    if spec.route.via is not None:
+        return list(spec.route.via)
+    if a == b and spec.route.goal.s >= spec.route.start.s:
+        return [a]
+    prev: dict[str, str] = {}
+    frontier = [a]
+    while frontier:
+        nxt = []
+        for lane in frontier:
+            for s in succ.get(lane, []):
+                if s not in prev and s != a:
+                    prev[s] = lane
+                    nxt.append(s)
+        if b in prev:
+            path = [b]
+            while path[-1] != a:
+                path.append(prev[path[-1]])
+            return path[::-1]
+        frontier = nxt
+    return None
+
+
+def _check_scenario(spec: ScenarioFile, doc: Document, m: MapFile) -> list[Diagnostic]:
+    out: list[Diagnostic] = []
+    lengths = lane_lengths(m)
+    succ = successors(m)
+    r = spec.route
+    out += _check_lane_pos(r.start.lane, r.start.s, ("route", "start"), doc, lengths)
+    out += _check_lane_pos(r.goal.lane, r.goal.s, ("route", "goal"), doc, lengths)
+    for k, lane in enumerate(r.via or []):
+        if lane not in lengths:
+            out.append(YML416(f"no lane '{lane}' in the map", doc.locate(("route", "via", k), value=True),
+                              hint=_suggest(lane, lengths)))
+    if not out:
+        lanes = _route_lanes(spec, succ)
+        if lanes is None:
+            out.append(YML420(f"no way from lane '{r.start.lane}' to lane '{r.goal.lane}' along lane successors",
+                              doc.locate(("route", "goal", "lane"), value=True), hint="add 'successors' in the map or give 'via'"))
+        elif r.via is not None:
+            if lanes[0] != r.start.lane or lanes[-1] != r.goal.lane:
+                out.append(YML420("'via' must begin with the start lane and end with the goal lane",
+                                  doc.locate(("route", "via"), value=True)))
+            for k, (x, y) in enumerate(zip(lanes, lanes[1:])):
+                if y not in succ.get(x, []):
+                    out.append(YML420(f"lane '{y}' does not follow lane '{x}' in the map",
+                                      doc.locate(("route", "via", k + 1), value=True)))
+        elif len(lanes) == 1 and r.goal.s < r.start.s:
+            out.append(YML420("the goal is behind the start on the same lane", doc.locate(("route", "goal", "s"), value=True)))
+    if spec.ego.start.lane is not None:
+        out += _check_lane_pos(spec.ego.start.lane, spec.ego.start.s, ("ego", "start"), doc, lengths)
+    ids: list[tuple[str, Path_]] = [("ego", ())]
+    for i, p in enumerate(spec.participants):
+        ids.append((p.id, ("participants", i, "id")))
+        if p.start is not None and p.start.lane is not None:
+            out += _check_lane_pos(p.start.lane, p.start.s, ("participants", i, "start"), doc, lengths)
+    for i, pop in enumerate(spec.populations):
+        ids.append((pop.id, ("populations", i, "id")))
+        for k, lane in enumerate(pop.lanes):
+            if lane not in lengths:
+                out.append(YML416(f"no lane '{lane}' in the map", doc.locate(("populations", i, "lanes", k), value=True),
+                                  hint=_suggest(lane, lengths)))
+    out += _check_ids(ids[1:], doc, "participant")
+    return out
+
+
+# ----------------------------------------------------------------------------- public API
+
+
+def _validate(doc: Document, model: type[BaseModel]) -> tuple[Any, list[Diagnostic]]:
+    try:
+        return model.model_validate(doc.data), []
+    except ValidationError as exc:
+        return None, validation_diagnostics(exc, doc, model)
+
+
+def _load_map(path: Path, referrer: Span | None) -> tuple[Map | None, list[Diagnostic]]:
+    doc, diags = _read_kind(path, "map", referrer)
+    if doc is None:
+        return None, diags
+    spec, vdiags = _validate(doc, MapFile)
+    if spec is None:
+        return None, diags + vdiags
+    cdiags = _check_map(spec, doc)
+    return (None if any(d.is_error for d in cdiags) else Map(spec, doc.path)), diags + cdiags
+
+
+def load_map(path: str | os.PathLike[str]) -> tuple[Map | None, list[Diagnostic]]:
+    """Load and validate a map file. Returns ``(map or None, diagnostics)``; never raises."""
+    return _load_map(Path(path), None)
+
+
+def load_scenario(path: str | os.PathLike[str]) -> tuple[Scenario | None, list[Diagnostic]]:
+    """Load a scenario, the scenarios it extends, and its map; locate its rule files.
+
+    Returns ``(scenario or None, diagnostics)``; the map's own diagnostics are included
+    (pointing into the map file). Never raises for bad input.
+    """
+    doc, diags = _read_kind(Path(path), "scenario", None)
+    if doc is None:
+        return None, diags
+    spec, vdiags = _validate(doc, ScenarioFile)
+    if spec is None:
+        return None, diags + vdiags
+    at_map = doc.locate(("map",), value=True)
+    m, mdiags = _load_map(_resolve(spec.map, at_map), at_map)
+    diags = diags + mdiags
+    rules = []
+    for i, ref in enumerate(spec.rules):
+        at = doc.locate(("rules", i, "file"), value=True) if ("rules", i, "file") in doc.where else doc.locate(("rules", i), value=True)
+        target = _resolve(ref.file, at)
+        if not target.is_file():
+            diags.append(YML418(f"rule file not found: {ref.file}", at, hint="paths are relative to the scenario file"))
+        rules.append(RuleFile(str(target), tuple(sorted(ref.constants.items())), at))
+    if m is None:
+        return None, diags
+    diags += _check_scenario(spec, doc, m.spec)
+    if any(d.is_error for d in diags):
+        return None, diags
+    return Scenario(spec, doc.path, m, tuple(rules)), diags
+
+
+def check_world_file(path: str | os.PathLike[str]) -> list[Diagnostic]:
+    """Everything ``twolevel check`` reports for one ``.yaml``/``.yml`` map or scenario file.
+
+    A scenario is checked with its map and, through ``twolevel.stl.lint.check_file``, its rule
+    files (with the scenario's dt, horizon H and :data:`~twolevel.world.signals.PROVIDED_SIGNALS`).
+    """
+    doc, diags = read_document(path)
+    if doc is None:
+        return diags
+    kind = file_kind(doc.data)
+    if kind == "map":
+        return load_map(path)[1]
+    if kind is None:
+        return [YML410("neither a map nor a scenario: no 'roads' (map) or 'ego'/'route'/'map' (scenario)",
+                       doc.locate(()), hint="add 'kind: map' or 'kind: scenario' at the top")]
+    scenario, diags = load_scenario(path)
+    spec = scenario.spec if scenario else _validate(doc, ScenarioFile)[0]
+    if spec is None:
+        return diags
+    rule_files = scenario.rules if scenario else ()
+    diags += _lint_rules(rule_files, spec)
+    return diags
+
+
+def _lint_rules(rule_files: Iterable[RuleFile], spec: ScenarioFile) -> list[Diagnostic]:
+    out: list[Diagnostic] = []
+    files = [rf for rf in rule_files if Path(rf.path).is_file()]
+    if not files:
+        return out
+    try:
+        from twolevel.stl.lint import check_file  # lazy: written in parallel, heavy-free
+    except ImportError:
+        return out
+    from twolevel.world.provided import PROVIDED_SIGNALS
+
+    for rf in files:
+        result = check_file(_display(Path(rf.path)), dt=spec.controller.dt, horizon=spec.controller.H,
+                            provided_signals=PROVIDED_SIGNALS)
+        out += list(result.diagnostics)
+    return out

@@ -1,0 +1,401 @@
+"""The YAML schemas of maps and scenarios (pydantic v2, the I/O boundary only).
+
+Everything the user writes is validated here and nowhere else; the runtime works on frozen
+dataclasses and numpy arrays built from these models (:mod:`twolevel.world.world`).
+Conventions: lengths in metres, speeds in m/s, times in seconds, **angles in degrees** (headings
+are measured counter-clockwise from the x axis; a positive arc angle turns left). A lateral offset
+is positive to the left of the direction the road is drawn in.
+
+Defaults are the paper's (Aasi, Vasile, Belta 2021): H = 10, dt = 0.1 s, r_near = 10 m, r = 0.3,
+D_safe = 1 m, box 4.22 m × 1.8 m, l_f = 2.11 m (in ``ego.vehicle``, validated by the models
+package), IDM after Treiber et al. (2000).
+
+Imported by ``twolevel check``: pydantic and the standard library only (no numpy).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+__all__ = [
+    "Arc", "Segment", "StartPose", "LaneSpec", "Road", "SpeedLimitSign", "StopSign", "LightCycle",
+    "LightStep", "TrafficLight", "MapFile", "LanePos", "Placement", "Box", "Ego", "RouteSpec",
+    "IDMParams", "Waypoint", "Participant", "Population", "RuleRef", "ControllerSettings",
+    "RunSettings", "ScenarioFile", "segment_length", "lane_length", "KMH",
+]
+
+KMH = 1.0 / 3.6  # [m/s] per km/h
+IDM_V0_MAX = 120.0 * KMH  # [m/s] Treiber's desired speed, capped further by the lane's limit
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+# ----------------------------------------------------------------------------------- maps
+
+
+class Arc(_Model):
+    """A circular arc continuing tangentially from the end of the previous segment."""
+
+    radius: float = Field(gt=0, le=1e5, description="radius of the arc [m]")
+    angle: float = Field(ge=-360, le=360, description="turning angle [deg], positive turns left")
+
+    @model_validator(mode="after")
+    def _nonzero(self) -> "Arc":
+        if self.angle == 0:
+            raise ValueError("an arc needs a non-zero angle [deg]; use 'line' for a straight piece")
+        return self
+
+
+class Segment(_Model):
+    """One piece of a road's reference line: exactly one of ``line``, ``arc``, ``points``."""
+
+    line: float | None = Field(default=None, gt=0, le=1e5, description="straight piece of this length [m]")
+    arc: Arc | None = Field(default=None, description="circular arc {radius [m], angle [deg]}")
+    points: list[tuple[float, float]] | None = Field(
+        default=None, min_length=1, description="polyline through these absolute points [[x, y], …] [m]"
+    )
+
+    @model_validator(mode="after")
+    def _exactly_one(self) -> "Segment":
+        given = [k for k in ("line", "arc", "points") if getattr(self, k) is not None]
+        if len(given) != 1:
+            raise ValueError("a segment is exactly one of 'line: <length m>', 'arc: {radius, angle}' or 'points: [[x, y], …]'")
+        return self
+
+
+class StartPose(_Model):
+    """Where a road's reference line starts."""
+
+    x: float = Field(default=0.0, description="x [m]")
+    y: float = Field(default=0.0, description="y [m]")
+    heading: float = Field(default=0.0, ge=-360, le=360, description="direction of the first segment [deg]")
+
+
+class LaneSpec(_Model):
+    """A lane: the road's reference line shifted sideways, driven in one direction."""
+
+    id: str = Field(min_length=1, description="lane id, unique in the map")
+    offset: float = Field(default=0.0, ge=-50, le=50, description="lateral offset from the reference line [m], + left")
+    width: float = Field(default=3.5, gt=0, le=10, description="lane width [m]")
+    direction: Literal["forward", "backward"] = Field(
+        default="forward", description="'forward': traffic drives the way the road is drawn; 'backward': against it"
+    )
+    speed_limit: float | None = Field(default=None, gt=0, le=100, description="limit from the lane's start [m/s]")
+    successors: list[str] = Field(default_factory=list, description="ids of lanes traffic continues into")
+
+
+class Road(_Model):
+    """A road: a reference line made of segments and the lanes along it."""
+
+    id: str = Field(min_length=1, description="road id, unique in the map")
+    start: StartPose = Field(default_factory=StartPose, description="start pose {x [m], y [m], heading [deg]}")
+    segments: list[Segment] = Field(min_length=1, description="line / arc / points pieces, in order")
+    lanes: list[LaneSpec] | None = Field(
+        default=None, description="lanes along the road; default: one forward lane on the reference line, id = road id"
+    )
+
+    def lane_specs(self) -> list[LaneSpec]:
+        """The road's lanes, with the single-lane default filled in."""
+        return list(self.lanes) if self.lanes is not None else [LaneSpec(id=self.id)]
+
+
+class SpeedLimitSign(_Model):
+    """A speed-limit sign: the limit holds from ``s`` on, until the next sign along the way."""
+
+    id: str = Field(min_length=1, description="sign id")
+    lane: str = Field(description="lane the sign applies to")
+    s: float = Field(ge=0, description="position along the lane, in its direction of travel [m]")
+    value: float = Field(gt=0, le=100, description="the limit [m/s] (50 km/h = 13.89 m/s)")
+
+
+class StopSign(_Model):
+    """A stop sign and its stop line."""
+
+    id: str = Field(min_length=1, description="sign id")
+    lane: str = Field(description="lane whose traffic must stop")
+    s: float = Field(ge=0, description="stop line position along the lane [m]")
+    stop_time: float = Field(default=1.0, ge=0, le=600, description="required standstill before the line [s]")
+
+
+class LightCycle(_Model):
+    """A fixed-time cycle green → yellow → red, repeating."""
+
+    green: float = Field(gt=0, le=3600, description="green phase [s]")
+    yellow: float = Field(default=3.0, ge=0, le=60, description="yellow phase [s]")
+    red: float = Field(gt=0, le=3600, description="red phase [s]")
+    offset: float = Field(default=0.0, ge=0, description="time into the cycle at t = 0 [s]")
+
+
+class LightStep(_Model):
+    """From time ``t`` on the light shows ``state`` (until the next step)."""
+
+    t: float = Field(ge=0, description="time [s]")
+    state: Literal["green", "yellow", "red"] = Field(description="green, yellow or red")
+
+
+class TrafficLight(_Model):
+    """A traffic light and its stop line: exactly one of ``cycle`` or ``script``."""
+
+    id: str = Field(min_length=1, description="light id")
+    lane: str = Field(description="lane the light controls")
+    s: float = Field(ge=0, description="stop line position along the lane [m]")
+    cycle: LightCycle | None = Field(default=None, description="fixed-time cycle {green, yellow, red, offset} [s]")
+    script: list[LightStep] | None = Field(default=None, min_length=1, description="scripted states [{t [s], state}]")
+
+    @model_validator(mode="after")
+    def _one_program(self) -> "TrafficLight":
+        if (self.cycle is None) == (self.script is None):
+            raise ValueError("a traffic light needs exactly one of 'cycle: {green, yellow, red}' or 'script: [{t, state}, …]'")
+        if self.script is not None:
+            ts = [step.t for step in self.script]
+            if ts[0] != 0:
+                raise ValueError("a light's script must start at t: 0")
+            if any(b <= a for a, b in zip(ts, ts[1:])):
+                raise ValueError("a light's script times must increase strictly")
+        return self
+
+
+class MapFile(_Model):
+    """A map: roads with lanes, speed-limit signs, stop signs and traffic lights."""
+
+    kind: Literal["map"] = Field(default="map", description="'map'")
+    name: str = Field(default="", description="a name for reports")
+    default_speed_limit: float = Field(default=50 * KMH, gt=0, le=100, description="limit where no sign says otherwise [m/s]")
+    roads: list[Road] = Field(min_length=1, description="the roads")
+    speed_limits: list[SpeedLimitSign] = Field(default_factory=list, description="speed-limit signs")
+    stop_signs: list[StopSign] = Field(default_factory=list, description="stop signs")
+    traffic_lights: list[TrafficLight] = Field(default_factory=list, description="traffic lights")
+
+
+# ------------------------------------------------------------------------------ scenarios
+
+
+class LanePos(_Model):
+    """A position given along a lane."""
+
+    lane: str = Field(description="lane id")
+    s: float = Field(default=0.0, ge=0, description="distance along the lane [m]")
+
+
+class Placement(_Model):
+    """A pose: either on a lane (``lane``, ``s``, ``lateral``) or free (``x``, ``y``, ``heading``)."""
+
+    lane: str | None = Field(default=None, description="lane id")
+    s: float | None = Field(default=None, ge=0, description="distance along the lane [m]")
+    lateral: float = Field(default=0.0, ge=-20, le=20, description="offset from the lane centre [m], + left")
+    x: float | None = Field(default=None, description="x [m]")
+    y: float | None = Field(default=None, description="y [m]")
+    heading: float | None = Field(default=None, ge=-360, le=360, description="heading [deg]")
+
+    @model_validator(mode="after")
+    def _one_form(self) -> "Placement":
+        on_lane = self.lane is not None
+        free = self.x is not None or self.y is not None
+        if on_lane == free:
+            raise ValueError("give either 'lane' (with 's' [m], 'lateral' [m]) or 'x', 'y' [m] with 'heading' [deg]")
+        if free and (self.x is None or self.y is None or self.heading is None):
+            raise ValueError("a free pose needs all of 'x' [m], 'y' [m] and 'heading' [deg]")
+        return self
+
+
+class Box(_Model):
+    """A vehicle's bounding box, centred on its reference point."""
+
+    length: float = Field(default=4.22, gt=0, le=30, description="length [m]")
+    width: float = Field(default=1.8, gt=0, le=5, description="width [m]")
+
+
+class Ego(_Model):
+    """The controlled vehicle."""
+
+    start: Placement = Field(description="initial pose")
+    speed: float = Field(default=0.0, ge=0, le=100, description="initial speed [m/s]")
+    box: Box = Field(default_factory=Box, description="bounding box [m]")
+    desired_speed: float | None = Field(default=None, gt=0, le=100, description="cap on the desired speed [m/s]")
+    vehicle: dict[str, float] = Field(
+        default_factory=dict, description="vehicle-parameter overrides (e.g. l_f [m]), validated by the models package"
+    )
+
+
+class RouteSpec(_Model):
+    """The route from A to B; the reference path is built along it."""
+
+    start: LanePos = Field(description="A: {lane, s [m]}")
+    goal: LanePos = Field(description="B: {lane, s [m]}")
+    via: list[str] | None = Field(default=None, description="lanes from A's to B's, inclusive; default: shortest by successors")
+    spacing: float = Field(default=0.5, gt=0, le=10, description="distance between reference points [m]")
+    stop_at_goal: bool = Field(default=True, description="desired speed falls to 0 at B")
+
+
+class IDMParams(_Model):
+    """Intelligent Driver Model parameters (Treiber, Hennecke, Helbing 2000)."""
+
+    v0: float | None = Field(default=None, gt=0, le=100, description="desired speed [m/s]; default min(120 km/h, lane limit)")
+    T: float = Field(default=1.6, gt=0, le=10, description="time headway [s]")
+    s0: float = Field(default=2.0, ge=0, le=50, description="jam distance [m]")
+    a: float = Field(default=0.73, gt=0, le=10, description="maximum acceleration [m/s²]")
+    b: float = Field(default=1.67, gt=0, le=10, description="comfortable deceleration [m/s²]")
+    delta: float = Field(default=4.0, gt=0, le=10, description="acceleration exponent [-]")
+
+
+class Waypoint(_Model):
+    """A scripted participant is at (x, y) at time t; linear in between."""
+
+    t: float = Field(ge=0, description="time [s]")
+    x: float = Field(description="x [m]")
+    y: float = Field(description="y [m]")
+
+
+Behaviour = Literal["stationary", "constant_velocity", "idm", "scripted"]
+
+
+class Participant(_Model):
+    """Another traffic participant."""
+
+    id: str = Field(min_length=1, description="participant id")
+    behaviour: Behaviour = Field(description="stationary, constant_velocity, idm or scripted")
+    start: Placement | None = Field(default=None, description="initial pose (not for scripted)")
+    speed: float = Field(default=0.0, ge=0, le=100, description="initial speed [m/s]")
+    box: Box = Field(default_factory=Box, description="bounding box [m]")
+    idm: IDMParams = Field(default_factory=IDMParams, description="IDM parameters (behaviour idm)")
+    waypoints: list[Waypoint] | None = Field(default=None, min_length=2, description="[{t [s], x [m], y [m]}] (scripted)")
+
+    @model_validator(mode="after")
+    def _fits_behaviour(self) -> "Participant":
+        if self.behaviour == "scripted":
+            if self.waypoints is None:
+                raise ValueError("a scripted participant needs 'waypoints: [{t, x, y}, …]'")
+            ts = [w.t for w in self.waypoints]
+            if any(b <= a for a, b in zip(ts, ts[1:])):
+                raise ValueError("waypoint times must increase strictly")
+        else:
+            if self.start is None:
+                raise ValueError(f"a {self.behaviour} participant needs 'start'")
+            if self.behaviour == "idm" and self.start.lane is None:
+                raise ValueError("an idm participant follows a lane: give 'start: {lane, s}'")
+        return self
+
+
+class Population(_Model):
+    """``count`` vehicles spread over lanes, placed deterministically from a seed."""
+
+    id: str = Field(min_length=1, description="prefix of the generated ids (id-0, id-1, …)")
+    count: int = Field(ge=1, le=5000, description="number of vehicles")
+    lanes: list[str] = Field(min_length=1, description="lanes to place them on")
+    s_range: tuple[float, float] | None = Field(default=None, description="[from, to] along each lane [m]; default whole lane")
+    speed_range: tuple[float, float] = Field(default=(20.0, 30.0), description="initial speeds drawn uniformly [m/s]")
+    behaviour: Literal["stationary", "constant_velocity", "idm"] = Field(default="idm", description="behaviour of all")
+    min_gap: float = Field(default=8.0, ge=0, le=500, description="minimum bumper-to-bumper gap when placing [m]")
+    box: Box = Field(default_factory=Box, description="bounding box of each [m]")
+    idm: IDMParams = Field(default_factory=IDMParams, description="IDM parameters")
+    seed: int | None = Field(default=None, ge=0, description="placement seed; default: the run's seed")
+
+    @model_validator(mode="after")
+    def _ranges(self) -> "Population":
+        for name in ("s_range", "speed_range"):
+            r = getattr(self, name)
+            if r is not None and (r[0] > r[1] or r[0] < 0):
+                raise ValueError(f"'{name}' must be [low, high] with 0 <= low <= high")
+        return self
+
+
+class RuleRef(_Model):
+    """A rule file and the values of its constants."""
+
+    file: str = Field(min_length=1, description="path of the .stl file, relative to the scenario")
+    constants: dict[str, float] = Field(default_factory=dict, description="constant name → value")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _plain_path(cls, data: Any) -> Any:
+        return {"file": data} if isinstance(data, str) else data
+
+
+class ControllerSettings(_Model):
+    """The two-level controller's settings; defaults are the paper's."""
+
+    H: int = Field(default=10, ge=1, le=200, description="MPC horizon [steps]")
+    dt: float = Field(default=0.1, gt=0, le=1, description="control period [s]")
+    r_near: float = Field(default=10.0, gt=0, le=500, description="sensing radius for nearby vehicles, signs, lights [m]")
+    r: float = Field(default=0.3, gt=0, le=10, description="radius of the ball sampled around u* by the low level [-]")
+    D_safe: float = Field(default=1.0, ge=0, le=50, description="collision_free distance at the high level [m]")
+    samples: int = Field(default=200, ge=0, le=100000, description="low-level sampling budget [controls]")
+    time_limit: float = Field(default=0.1, gt=0, le=60, description="solver time limit per step [s]")
+    solver: Literal["modes", "highs"] = Field(default="modes", description="'modes' (mode search, Clarabel) or 'highs' (MILP)")
+    stop_speed: float = Field(default=0.1, gt=0, le=5, description="speed counted as standing still [m/s]")
+    yellow_decel: float = Field(default=3.0, gt=0, le=15, description="deceleration that decides 'can stop at yellow' [m/s²]")
+
+
+class RunSettings(_Model):
+    """The closed-loop run."""
+
+    duration: float = Field(default=60.0, gt=0, le=36000, description="simulated time [s]")
+    seed: int = Field(default=0, ge=0, description="seed of every random choice")
+
+
+class ScenarioFile(_Model):
+    """A scenario: map, ego, route, other traffic, rules, controller and run settings."""
+
+    kind: Literal["scenario"] = Field(default="scenario", description="'scenario'")
+    name: str = Field(default="", description="a name for reports")
+    extends: str | None = Field(default=None, description="a base scenario this one overrides (relative path)")
+    map: str = Field(min_length=1, description="path of the map, relative to this file")
+    ego: Ego = Field(description="the controlled vehicle")
+    route: RouteSpec = Field(description="route from A to B")
+    participants: list[Participant] = Field(default_factory=list, description="other traffic, one by one")
+    populations: list[Population] = Field(default_factory=list, description="other traffic, by the lane-full")
+    rules: list[RuleRef] = Field(default_factory=list, description="rule files and constant bindings")
+    controller: ControllerSettings = Field(default_factory=ControllerSettings, description="controller settings")
+    run: RunSettings = Field(default_factory=RunSettings, description="run settings")
+
+
+# ------------------------------------------------ pure-Python lengths (no numpy: check path)
+
+
+def segment_length(seg: Segment, offset: float, start: tuple[float, float]) -> tuple[float, tuple[float, float]]:
+    """Length [m] of ``seg`` at lateral ``offset`` [m] and the end point of its reference line.
+
+    ``start`` is where the reference line is when the segment begins (needed for ``points``).
+    For arcs the length at an offset is exact, |R − offset·sign(angle)|·|angle|; polylines
+    ignore the small corner corrections of an offset line.
+    """
+    if seg.line is not None:
+        return seg.line, start  # end point not needed for straight pieces' lengths
+    if seg.arc is not None:
+        theta = math.radians(abs(seg.arc.angle))
+        radius = seg.arc.radius - offset * (1.0 if seg.arc.angle > 0 else -1.0)
+        return abs(radius) * theta, start
+    pts = [start, *seg.points] if seg.points else [start]
+    total = sum(math.dist(a, b) for a, b in zip(pts, pts[1:]))
+    return total, pts[-1]
+
+
+def lane_length(road: Road, offset: float) -> float:
+    """Length [m] of a lane of ``road`` at lateral ``offset`` (approximate for polylines)."""
+    # Track the reference line's end point only as far as polylines need it.
+    x, y, h = road.start.x, road.start.y, math.radians(road.start.heading)
+    total = 0.0
+    for seg in road.segments:
+        length, _ = segment_length(seg, offset, (x, y))
+        total += length
+        if seg.line is not None:
+            x, y = x + seg.line * math.cos(h), y + seg.line * math.sin(h)
+        elif seg.arc is not None:
+            th = math.radians(seg.arc.angle)
+            sign = 1.0 if th > 0 else -1.0
+            cx, cy = x - sign * seg.arc.radius * math.sin(h), y + sign * seg.arc.radius * math.cos(h)
+            h2 = h + th
+            x, y = cx + sign * seg.arc.radius * math.sin(h2), cy - sign * seg.arc.radius * math.cos(h2)
+            h = h2
+        elif seg.points:
+            px, py = seg.points[-1]
+            prev = seg.points[-2] if len(seg.points) > 1 else (x, y)
+            if (px, py) != tuple(prev):
+                h = math.atan2(py - prev[1], px - prev[0])
+            x, y = px, py
+    return total
