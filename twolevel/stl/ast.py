@@ -253,11 +253,17 @@ class Rule(Node):
 
 @dataclass(frozen=True)
 class RuleFile(Node):
-    """A parsed rule file: its declarations and rules, in source order."""
+    """A parsed rule file: its declarations and rules, in source order.
+
+    ``parenthesized`` holds the spans of the subexpressions the source wrapped in parentheses
+    (the span of the expression inside them); the style checks (STL3xx) read it. It does not take
+    part in equality.
+    """
 
     path: str = field(compare=False)
     declarations: tuple[Declaration, ...] = ()
     rules: tuple[Rule, ...] = ()
+    parenthesized: frozenset[Span] = field(default=frozenset(), compare=False, repr=False)
 
     def children(self) -> tuple[Node, ...]:
         return self.declarations + self.rules
