@@ -1,0 +1,151 @@
+"""HiGHS backend (highspy): MILP and LP from whole arrays, status mapping, time limit, MIP start.
+
+highspy is imported lazily, on first solve. The model goes in through one ``passModel`` call
+with the CSC arrays of :class:`~twolevel.milp.model.MilpModel`; a quadratic cost is not passed
+(HiGHS's QP solver failed on most polish QPs of the prototype, anchors.md): turn it into its L1
+counterpart first (:func:`twolevel.milp.transform.l1_surrogate`) or use :mod:`twolevel.milp.qp`.
+"""
+
+from __future__ import annotations
+
+import enum
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from twolevel.milp.model import MilpModel
+
+__all__ = ["Status", "Solution", "CAPABILITIES", "solve_highs", "write_model"]
+
+CAPABILITIES = frozenset({"milp", "lp"})
+
+
+class Status(str, enum.Enum):
+    """Outcome of a solve, the same for every backend."""
+
+    OPTIMAL = "optimal"
+    INFEASIBLE = "infeasible"
+    UNBOUNDED = "unbounded"
+    TIME_LIMIT = "time_limit"
+    ERROR = "error"
+
+
+@dataclass(frozen=True)
+class Solution:
+    """A backend's answer. ``x`` is None when there is no primal point; on ``time_limit`` it is
+    the incumbent if one was found. Times in milliseconds [ms]."""
+
+    status: Status
+    x: np.ndarray | None
+    objective: float
+    solve_ms: float
+    setup_ms: float = 0.0
+    gap: float = float("nan")
+    info: dict[str, object] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return self.status is Status.OPTIMAL
+
+
+def _highs():
+    import highspy  # lazy: heavy
+
+    return highspy
+
+
+def _status(h, highspy) -> Status:  # type: ignore[no-untyped-def]
+    ms = h.getModelStatus()
+    S = highspy.HighsModelStatus
+    if ms == S.kOptimal:
+        return Status.OPTIMAL
+    if ms == S.kInfeasible:
+        return Status.INFEASIBLE
+    if ms in (S.kUnbounded, S.kUnboundedOrInfeasible):
+        return Status.UNBOUNDED
+    if ms in (S.kTimeLimit, S.kIterationLimit, S.kSolutionLimit, S.kInterrupt):
+        return Status.TIME_LIMIT
+    if ms == S.kModelEmpty:
+        return Status.OPTIMAL
+    return Status.ERROR
+
+
+def _pass(h, model: MilpModel, highspy, relax: bool = False) -> None:  # type: ignore[no-untyped-def]
+    A = model.A
+    inf = highspy.kHighsInf
+    integrality = (np.zeros(model.n_cols, np.int32) if relax
+                   else model.integrality.astype(np.int32))
+    st = h.passModel(
+        int(model.n_cols), int(model.n_rows), int(A.nnz), 1, 1, float(model.c0),
+        np.ascontiguousarray(model.q, float),
+        np.clip(model.lb, -inf, inf), np.clip(model.ub, -inf, inf),
+        np.clip(model.row_lo, -inf, inf), np.clip(model.row_hi, -inf, inf),
+        A.indptr.astype(np.int32), A.indices.astype(np.int32), np.ascontiguousarray(A.data, float),
+        integrality,
+    )
+    if st == highspy.HighsStatus.kError:
+        raise RuntimeError("HiGHS rejected the model")
+
+
+def solve_highs(
+    model: MilpModel, *, time_limit: float | None = None, mip_start: np.ndarray | None = None,
+    mip_gap: float = 1e-6, threads: int = 1, relax: bool = False,
+    options: dict[str, object] | None = None,
+) -> Solution:
+    """Solve the linear part of ``model`` (the quadratic cost, if any, is ignored — see the module
+    docstring) with HiGHS. ``time_limit`` [s]; ``mip_start`` a full point (its integer part is
+    what matters); ``relax`` drops integrality (the LP relaxation)."""
+    highspy = _highs()
+    t0 = time.perf_counter()
+    h = highspy.Highs()
+    h.setOptionValue("output_flag", False)
+    h.setOptionValue("threads", threads)
+    h.setOptionValue("mip_rel_gap", mip_gap)
+    h.setOptionValue("random_seed", 0)
+    if time_limit is not None:
+        h.setOptionValue("time_limit", float(time_limit))
+    for k, v in (options or {}).items():
+        h.setOptionValue(k, v)
+    try:
+        _pass(h, model, highspy, relax)
+    except RuntimeError as e:
+        return Solution(Status.ERROR, None, float("nan"), 0.0, info={"error": str(e)})
+    if mip_start is not None:
+        idx = np.arange(model.n_cols, dtype=np.int32)
+        h.setSolution(int(model.n_cols), idx, np.asarray(mip_start, float))
+    t1 = time.perf_counter()
+    h.run()
+    t2 = time.perf_counter()
+    status = _status(h, highspy)
+    x = None
+    obj = float("nan")
+    info = h.getInfo()
+    has_point = info.primal_solution_status == highspy.kSolutionStatusFeasible
+    if has_point and status in (Status.OPTIMAL, Status.TIME_LIMIT):
+        x = np.asarray(h.getSolution().col_value, float)
+        obj = float(info.objective_function_value)
+    gap = float(getattr(info, "mip_gap", float("nan"))) if model.integrality.any() else 0.0
+    return Solution(status, x, obj, (t2 - t1) * 1e3, (t1 - t0) * 1e3, gap,
+                    {"nodes": int(getattr(info, "mip_node_count", 0) or 0)})
+
+
+def write_model(model: MilpModel, path: str | Path) -> None:
+    """Write the model's linear part as ``.mps`` or ``.lp`` (by the suffix) via HiGHS, with the
+    model's column and row names."""
+    highspy = _highs()
+    h = highspy.Highs()
+    h.setOptionValue("output_flag", False)
+    _pass(h, model, highspy)
+    for j, name in enumerate(model.col_names):
+        h.passColName(j, _safe(name))
+    for i, name in enumerate(model.row_names):
+        h.passRowName(i, _safe(name))
+    st = h.writeModel(str(path))
+    if st == highspy.HighsStatus.kError:
+        raise OSError(f"HiGHS could not write {path}")
+
+
+def _safe(name: str) -> str:
+    return name.replace(" ", "_").replace("[", "(").replace("]", ")")
