@@ -589,7 +589,12 @@ def collision_free_builtin(x: str, y: str, others: np.ndarray) -> Builtin:
             if not (math.isfinite(ox) and math.isfinite(oy)):
                 continue
             dx, dy = add(ex, -ox), add(ey, -oy)
-            pairs.append(mk(True, [add(add(scale(dx, a), scale(dy, b)), -d) for a, b in faces]))
+            pair = mk(True, [add(add(scale(dx, a), scale(dy, b)), -d) for a, b in faces])
+            if isinstance(pair, Op) and s > 0:
+                # exact: the least 1-norm distance from the ego's box to the vehicle, minus d
+                (xlo, xhi), (ylo, yhi) = enc.bounds(dx), enc.bounds(dy)
+                pair.lo_hint = max(xlo, -xhi, 0.0) + max(ylo, -yhi, 0.0) - d
+            pairs.append(pair)
         return scale(mk(False, pairs), s) if pairs else s * INF
 
     return fn

@@ -35,11 +35,12 @@ class Lin:
 class Op:
     """``min`` (``is_max`` False) or ``max`` of two or more children."""
 
-    __slots__ = ("is_max", "kids", "__weakref__")
+    __slots__ = ("is_max", "kids", "lo_hint")
 
-    def __init__(self, is_max: bool, kids: tuple["Tree", ...]) -> None:
+    def __init__(self, is_max: bool, kids: tuple["Tree", ...], lo_hint: float = -INF) -> None:
         self.is_max = is_max
         self.kids = kids
+        self.lo_hint = lo_hint  # a valid lower bound tighter than interval arithmetic, if known
 
     def __repr__(self) -> str:
         return f"{'max' if self.is_max else 'min'}{self.kids}"
@@ -106,6 +107,8 @@ def scale(t: Tree, k: float) -> Tree:
         return t * k
     if k == 0.0:
         return 0.0
+    if k == 1.0:
+        return t
     if isinstance(t, Lin):
         return Lin(t.idx, tuple(v * k for v in t.val), t.c * k)
     return Op(t.is_max if k > 0 else not t.is_max, tuple(scale(c, k) for c in t.kids))
@@ -154,5 +157,6 @@ def bounds(t: Tree, lb: np.ndarray, ub: np.ndarray,
         los = [b[0] for b in bs]
         his = [b[1] for b in bs]
         res = (max(los), max(his)) if t.is_max else (min(los), min(his))
+        res = (max(res[0], t.lo_hint), res[1])
     memo[key] = (res[0], res[1], t)
     return res
