@@ -1,0 +1,209 @@
+"""Clarabel backend: the convex QP of a model with its integer columns fixed (a *mode*).
+
+:class:`FixedModeQP` builds the Clarabel problem once per model pattern; a new mode or new model
+values (same pattern) go in through Clarabel's in-place ``update`` (presolve off, structural
+zeros kept), so the symbolic factorisation is reused. The pattern never depends on the mode: a
+big-M row whose guard binary is 0 becomes ``0·x ≤ 1`` (its coefficients are zeroed, not removed).
+
+Row layout handed to Clarabel (all from the model's continuous columns):
+``[equalities (ZeroCone); a·x ≤ hi; −a·x ≤ −lo; x ≤ ub; −x ≤ −lb]`` (NonnegativeCone).
+Rows with no continuous entry (e.g. the cover rows ``Σ b ≥ 1``) are checked in numpy instead.
+clarabel is imported lazily.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import scipy.sparse as sp
+
+from twolevel.milp.highs import Solution, Status
+from twolevel.milp.model import MilpModel, _build_pattern
+
+__all__ = ["FixedModeQP", "CAPABILITIES", "solve_fixed"]
+
+CAPABILITIES = frozenset({"qp", "lp"})
+
+
+def _status(s: object) -> Status:
+    name = str(s).split(".")[-1]
+    if name in ("Solved", "AlmostSolved"):
+        return Status.OPTIMAL
+    if name in ("PrimalInfeasible", "AlmostPrimalInfeasible"):
+        return Status.INFEASIBLE
+    if name in ("DualInfeasible", "AlmostDualInfeasible"):
+        return Status.UNBOUNDED
+    if name in ("MaxTime", "MaxIterations"):
+        return Status.TIME_LIMIT
+    return Status.ERROR
+
+
+class FixedModeQP:
+    """Clarabel QP of ``model`` with its integer columns fixed; reusable across modes."""
+
+    def __init__(self, model: MilpModel, *, tol: float = 1e-8, time_limit: float | None = None) -> None:
+        self.model = model
+        self.tol = tol
+        self.time_limit = time_limit
+        self.ints = np.flatnonzero(model.integrality)
+        self.cont = np.flatnonzero(~model.integrality)
+        n, m = model.n_cols, model.n_rows
+        self._pos = np.full(n, -1, np.int64)
+        self._pos[self.cont] = np.arange(self.cont.size)
+        A = model.A
+        cols = np.repeat(np.arange(n), np.diff(A.indptr))
+        rows = A.indices.astype(np.int64)
+        is_c = self._pos[cols] >= 0
+        self._tri_c = np.flatnonzero(is_c)  # A.data positions of continuous entries
+        self._tri_i = np.flatnonzero(~is_c)
+        rc, cc = rows[is_c], self._pos[cols[is_c]]
+        has_c = np.zeros(m, bool)
+        has_c[rc] = True
+        lo, hi = model.row_lo, model.row_hi
+        self._eq = np.flatnonzero(has_c & (lo == hi))
+        self._up = np.flatnonzero(has_c & (lo != hi) & np.isfinite(hi))
+        self._lo = np.flatnonzero(has_c & (lo != hi) & np.isfinite(lo))
+        self._bin_rows = np.flatnonzero(~has_c)
+        self._vub = np.flatnonzero(np.isfinite(model.ub[self.cont]))
+        self._vlb = np.flatnonzero(np.isfinite(model.lb[self.cont]))
+        # where each model row lands in Clarabel's rows (a row may land twice: up and lo)
+        blocks = [self._eq, self._up, self._lo]
+        out_r, out_c, src, sign = [], [], [], []
+        off = 0
+        for blk, sgn in zip(blocks, (1.0, 1.0, -1.0)):
+            where = np.full(m, -1, np.int64)
+            where[blk] = off + np.arange(blk.size)
+            sel = where[rc] >= 0
+            out_r.append(where[rc][sel]), out_c.append(cc[sel])
+            src.append(self._tri_c[sel]), sign.append(np.full(int(sel.sum()), sgn))
+            off += blk.size
+        nb = off
+        out_r.append(nb + np.arange(self._vub.size)), out_c.append(self._vub)
+        out_r.append(nb + self._vub.size + np.arange(self._vlb.size)), out_c.append(self._vlb)
+        self._n_eq = self._eq.size
+        self._n_rows = nb + self._vub.size + self._vlb.size
+        self._src = np.concatenate(src)
+        self._sign = np.concatenate(sign)
+        self._n_model_tri = self._src.size
+        r_all = np.concatenate(out_r)
+        c_all = np.concatenate(out_c)
+        self._pat = _build_pattern(r_all, c_all, (self._n_rows, self.cont.size))
+        self._bound_vals = np.concatenate([np.ones(self._vub.size), -np.ones(self._vlb.size)])
+        self._row_of_tri = np.concatenate(out_r[:3])  # Clarabel row of each model triplet
+        # guard binary of each model row (big-M rows)
+        self._guard = np.full(m, -1, np.int64)
+        for d in model.disjunctions:
+            for bcol, rws in zip(d.binaries, d.rows):
+                self._guard[rws] = bcol
+        self._solver = None
+        self._P_c: sp.csc_matrix | None = None
+        self.setup_ms = 0.0
+
+    def disjunctive_rows(self) -> np.ndarray:
+        """Bool per model row: every big-M and cover row of every disjunction — pass it as
+        ``disable`` (with any ``x_int``) for the lower bound of design.md's mode search."""
+        mask = np.zeros(self.model.n_rows, bool)
+        for d in self.model.disjunctions:
+            mask[d.cover_row] = True
+            for r in d.rows:
+                mask[r] = True
+        return mask
+
+    # ------------------------------------------------------------------ data
+    def _data(self, x_int: np.ndarray, disable: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+        model = self.model
+        full = np.zeros(model.n_cols)
+        full[self.ints] = x_int
+        off_rows = np.zeros(model.n_rows, bool)
+        g = self._guard
+        guarded = g >= 0
+        off_rows[guarded] = full[g[guarded]] < 0.5
+        if disable is not None:
+            off_rows |= disable
+        # shift by the fixed integer part
+        A = model.A
+        cols = np.repeat(np.arange(model.n_cols), np.diff(A.indptr))
+        ti = self._tri_i
+        shift = np.bincount(A.indices[ti], weights=A.data[ti] * full[cols[ti]], minlength=model.n_rows)
+        # rows without continuous entries: check in numpy
+        br = self._bin_rows[~off_rows[self._bin_rows]]
+        ok = bool(np.all(shift[br] >= model.row_lo[br] - 1e-9) and np.all(shift[br] <= model.row_hi[br] + 1e-9))
+        vals = A.data[self._src] * self._sign
+        vals = np.where(off_rows_of(self, off_rows), 0.0, vals)
+        data = self._pat.scatter(np.concatenate([vals, self._bound_vals]))
+        b = np.concatenate([
+            model.row_hi[self._eq] - shift[self._eq],
+            np.where(off_rows[self._up], 1.0, model.row_hi[self._up] - shift[self._up]),
+            np.where(off_rows[self._lo], 1.0, -(model.row_lo[self._lo] - shift[self._lo])),
+            model.ub[self.cont][self._vub],
+            -model.lb[self.cont][self._vlb],
+        ])
+        # cost of the continuous part: q_c + P_ci x_i
+        q = model.q[self.cont].copy()
+        if model.P is not None:
+            Pf = model.P + sp.triu(model.P, 1).T
+            if self.ints.size:
+                q += Pf[self.cont][:, self.ints] @ x_int
+            self._P_c = sp.triu(Pf[self.cont][:, self.cont]).tocsc()
+        else:
+            self._P_c = sp.csc_matrix((self.cont.size, self.cont.size))
+        return data, b, q, ok
+
+    def solve(self, x_int: np.ndarray | None = None, *, disable: np.ndarray | None = None) -> Solution:
+        """Solve with the integer columns at ``x_int`` (in ``model.integrality`` order; rounded).
+        ``disable`` (bool per model row) switches further rows off, e.g. every disjunctive row
+        for a lower bound."""
+        import clarabel  # lazy: heavy
+
+        model = self.model
+        x_int = np.zeros(self.ints.size) if x_int is None else np.round(np.asarray(x_int, float))
+        t0 = time.perf_counter()
+        data, b, q, ok = self._data(x_int, disable)
+        if not ok:
+            return Solution(Status.INFEASIBLE, None, float("nan"), 0.0,
+                            info={"reason": "integer-only rows violated"})
+        A = sp.csc_matrix((data, self._pat.indices, self._pat.indptr), shape=self._pat.shape)
+        P = self._P_c
+        if self._solver is None:
+            st = clarabel.DefaultSettings()
+            st.verbose = False
+            st.presolve_enable = False
+            st.input_sparse_dropzeros = False
+            st.tol_gap_abs = st.tol_gap_rel = st.tol_feas = self.tol
+            if self.time_limit is not None:
+                st.time_limit = self.time_limit
+            cones = []
+            if self._n_eq:
+                cones.append(clarabel.ZeroConeT(self._n_eq))
+            if self._n_rows - self._n_eq:
+                cones.append(clarabel.NonnegativeConeT(self._n_rows - self._n_eq))
+            self._solver = clarabel.DefaultSolver(P, q, A, b, cones, st)
+        else:
+            self._solver.update(P=P.data, q=q, A=data, b=b)
+        t1 = time.perf_counter()
+        sol = self._solver.solve()
+        t2 = time.perf_counter()
+        status = _status(sol.status)
+        x = None
+        obj = float("nan")
+        if status is Status.OPTIMAL:
+            x = np.zeros(model.n_cols)
+            x[self.cont] = np.asarray(sol.x)
+            x[self.ints] = x_int
+            obj = model.objective(x)
+        self.setup_ms = (t1 - t0) * 1e3
+        return Solution(status, x, obj, (t2 - t1) * 1e3, self.setup_ms,
+                        info={"z": np.asarray(sol.z), "iterations": int(sol.iterations)})
+
+
+def off_rows_of(qp: FixedModeQP, off_rows: np.ndarray) -> np.ndarray:
+    """Per Clarabel triplet of the model part: is its model row switched off?"""
+    rows = qp.model.A.indices[qp._src]
+    return off_rows[rows]
+
+
+def solve_fixed(model: MilpModel, x: np.ndarray, **kw: object) -> Solution:
+    """One-shot: the QP of ``model`` with the integer columns taken from the point ``x``."""
+    qp = FixedModeQP(model, **kw)  # type: ignore[arg-type]
+    return qp.solve(np.asarray(x)[qp.ints])
