@@ -1,0 +1,275 @@
+"""Static facts about formulas: signals read, time horizons, linearity, partial evaluation.
+
+Pure Python (no numpy): ``twolevel check`` imports it. Times are in seconds [s]; ``next`` and
+``prev`` shift by one sample, i.e. ``dt`` [s] (pass ``dt=0`` when unknown: they then count 0).
+
+:func:`substitute` is the design's "activation is partial evaluation": the signals known at solve
+time (and the scenario's constants) become numbers, arithmetic over numbers and comparisons
+between numbers fold, and ``true``/``false`` propagate through the connectives and temporal
+operators, so an inactive rule collapses to ``true`` before the encoder creates any binary.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Callable, Mapping
+
+from twolevel.stl.ast import (
+    Abs,
+    Arith,
+    BinTemporal,
+    Binary,
+    BoolConst,
+    Call,
+    Compare,
+    Edge,
+    Neg,
+    Node,
+    Not,
+    Num,
+    Temporal,
+    Var,
+)
+
+__all__ = [
+    "signals_read",
+    "future_horizon",
+    "past_depth",
+    "is_constant",
+    "is_linear",
+    "nonlinear_nodes",
+    "compare_robustness",
+    "fold_constants",
+    "fold_term",
+    "substitute",
+]
+
+
+def signals_read(formula: Node) -> set[str]:
+    """Every name the formula reads: signals, constants and references to other rules."""
+    return {n.name for n in formula.walk() if isinstance(n, Var)}
+
+
+def _horizon(node: Node, dt: float, refs: Mapping[str, float], future: bool) -> float:
+    """Future horizon (``future=True``) or past depth of ``node`` [s]."""
+    rec: Callable[[Node], float] = lambda n: _horizon(n, dt, refs, future)  # noqa: E731
+    if isinstance(node, Var):
+        return refs.get(node.name, 0.0)
+    if isinstance(node, (Not, Edge)):
+        inner = rec(node.operand)
+        return inner + dt if (isinstance(node, Edge) and not future) else inner
+    if isinstance(node, Binary):
+        return max(rec(node.left), rec(node.right))
+    same = future
+    if isinstance(node, Temporal):
+        inner = rec(node.operand)
+        ahead = node.op in ("always", "eventually", "next")
+        if node.op in ("next", "prev"):
+            lo = hi = dt
+        elif node.interval is None:
+            lo, hi = 0.0, math.inf
+        else:
+            lo, hi = node.interval.lo, node.interval.hi
+        if ahead == same:  # the operator looks the way we measure: widths add up
+            return hi + inner
+        return max(0.0, inner - lo)  # looks the other way: only reduces the reach
+    if isinstance(node, BinTemporal):
+        left, right = rec(node.left), rec(node.right)
+        ahead = node.op in ("until", "unless")
+        lo, hi = (0.0, math.inf) if node.interval is None else (node.interval.lo, node.interval.hi)
+        if ahead == same:
+            return hi + max(left, right)
+        return max(0.0, left, right - lo)
+    return 0.0  # predicates, constants, calls: the current sample only
+
+
+def future_horizon(formula: Node, dt: float = 0.0, refs: Mapping[str, float] | None = None) -> float:
+    """How far ahead of the current sample the formula reads [s] (``inf`` if unbounded).
+
+    ``refs`` gives the horizon of rules the formula refers to by name.
+    """
+    return _horizon(formula, dt, refs or {}, True)
+
+
+def past_depth(formula: Node, dt: float = 0.0, refs: Mapping[str, float] | None = None) -> float:
+    """How far back before the current sample the formula reads [s] (``inf`` if unbounded)."""
+    return _horizon(formula, dt, refs or {}, False)
+
+
+# ----------------------------------------------------------------------------- linearity
+
+
+def is_constant(term: Node, constants: frozenset[str] | set[str] = frozenset()) -> bool:
+    """True when the term involves only numbers and the named ``constants``."""
+    return all(not isinstance(n, Var) or n.name in constants for n in term.walk())
+
+
+def nonlinear_nodes(formula: Node, constants: frozenset[str] | set[str] = frozenset()) -> list[Arith]:
+    """The arithmetic nodes that make a predicate non-linear in the signals: a product of two
+    non-constant terms, or a division by a non-constant term.
+
+    ``abs(t)`` of a linear ``t`` is *not* reported: it is piecewise linear, which a MILC encodes
+    (with one binary where it is not convexly placed).
+    """
+    out = []
+    for n in formula.walk():
+        if isinstance(n, Arith):
+            if n.op == "*" and not is_constant(n.left, constants) and not is_constant(n.right, constants):
+                out.append(n)
+            elif n.op == "/" and not is_constant(n.right, constants):
+                out.append(n)
+    return out
+
+
+def is_linear(term: Node, constants: frozenset[str] | set[str] = frozenset()) -> bool:
+    """True when the term (or every predicate of a formula) is affine in the signals, with
+    ``abs`` allowed (piecewise linear, encodable)."""
+    return not nonlinear_nodes(term, constants)
+
+
+# ----------------------------------------------------------------------------- partial evaluation
+
+
+def compare_robustness(op: str, a: float, b: float) -> float:
+    """Robustness of ``a op b`` (design.md): ``b - a`` for ``<``/``<=``, ``a - b`` for
+    ``>``/``>=``, ``-|a - b|`` for ``==``, ``|a - b|`` for ``!==``."""
+    if op in ("<", "<="):
+        return b - a
+    if op in (">", ">="):
+        return a - b
+    if op == "==":
+        return -abs(a - b)
+    return abs(a - b)
+
+
+def _arith(op: str, a: float, b: float) -> float | None:
+    if op == "+":
+        return a + b
+    if op == "-":
+        return a - b
+    if op == "*":
+        return a * b
+    return a / b if b != 0 else None
+
+
+def _is(node: Node, value: bool) -> bool:
+    return isinstance(node, BoolConst) and node.value is value
+
+
+def _as_formula(node: Node, fold_predicates: bool) -> Node:
+    """A number in a formula position (a substituted signal read as a formula, whose robustness
+    is its value) becomes ``value >= 0``, or ``true``/``false`` when predicates fold."""
+    if not isinstance(node, Num):
+        return node
+    if fold_predicates:
+        return BoolConst(node.value >= 0, span=node.span)
+    return Compare(">=", node, Num(0.0), span=node.span)
+
+
+def _fold(node: Node, values: Mapping[str, float], fold_predicates: bool) -> Node:
+    term = lambda n: _fold(n, values, fold_predicates)  # noqa: E731
+    rec = lambda n: _as_formula(_fold(n, values, fold_predicates), fold_predicates)  # noqa: E731
+    sp = node.span
+    if isinstance(node, Var):
+        return Num(float(values[node.name]), span=sp) if node.name in values else node
+    if isinstance(node, (Num, BoolConst)):
+        return node
+    if isinstance(node, Neg):
+        inner = term(node.operand)
+        return Num(-inner.value, span=sp) if isinstance(inner, Num) else Neg(inner, span=sp)
+    if isinstance(node, Abs):
+        inner = term(node.operand)
+        return Num(abs(inner.value), span=sp) if isinstance(inner, Num) else Abs(inner, span=sp)
+    if isinstance(node, Arith):
+        a, b = term(node.left), term(node.right)
+        if isinstance(a, Num) and isinstance(b, Num):
+            v = _arith(node.op, a.value, b.value)
+            if v is not None and math.isfinite(v):
+                return Num(v, span=sp)
+        return Arith(node.op, a, b, span=sp)
+    if isinstance(node, Compare):
+        a, b = term(node.left), term(node.right)
+        if fold_predicates and isinstance(a, Num) and isinstance(b, Num):
+            return BoolConst(compare_robustness(node.op, a.value, b.value) >= 0, span=sp)
+        return Compare(node.op, a, b, span=sp)
+    if isinstance(node, Call):
+        return Call(node.name, tuple(term(a) for a in node.args), span=sp)
+    if isinstance(node, Not):
+        inner = rec(node.operand)
+        return BoolConst(not inner.value, span=sp) if isinstance(inner, BoolConst) else Not(inner, span=sp)
+    if isinstance(node, Edge):
+        return Edge(node.op, rec(node.operand), span=sp)
+    if isinstance(node, Binary):
+        a, b = rec(node.left), rec(node.right)
+        return _simplify_binary(node.op, a, b, sp)
+    if isinstance(node, Temporal):
+        inner = rec(node.operand)
+        if isinstance(inner, BoolConst):
+            return BoolConst(inner.value, span=sp)
+        return Temporal(node.op, node.interval, inner, span=sp)
+    if isinstance(node, BinTemporal):
+        a, b = rec(node.left), rec(node.right)
+        if _is(b, False) and node.op in ("until", "since"):
+            return BoolConst(False, span=sp)  # the right side never holds
+        if _is(a, True) and node.op in ("until", "since"):  # the left side always holds
+            return Temporal("eventually" if node.op == "until" else "once", node.interval, b, span=sp)
+        if _is(a, True) and node.op == "unless":
+            return BoolConst(True, span=sp)  # weak until with an always-true left side
+        return BinTemporal(node.op, node.interval, a, b, span=sp)
+    raise TypeError(f"unknown node {type(node).__name__}")
+
+
+def _simplify_binary(op: str, a: Node, b: Node, sp: object) -> Node:
+    ca, cb = isinstance(a, BoolConst), isinstance(b, BoolConst)
+    if op == "and":
+        if _is(a, False) or _is(b, False):
+            return BoolConst(False, span=sp)
+        if _is(a, True):
+            return b
+        if _is(b, True):
+            return a
+    elif op == "or":
+        if _is(a, True) or _is(b, True):
+            return BoolConst(True, span=sp)
+        if _is(a, False):
+            return b
+        if _is(b, False):
+            return a
+    elif op == "implies":
+        if _is(a, False) or _is(b, True):
+            return BoolConst(True, span=sp)
+        if _is(a, True):
+            return b
+        if _is(b, False):
+            return Not(a, span=sp)
+    elif ca and cb:  # iff / xor: only when both sides are known
+        same = a.value is b.value  # type: ignore[union-attr]
+        return BoolConst(same if op == "iff" else not same, span=sp)
+    return Binary(op, a, b, span=sp)  # type: ignore[arg-type]
+
+
+def substitute(formula: Node, values: Mapping[str, float], *, fold_predicates: bool = True) -> Node:
+    """Replace the named signals/constants by numbers and simplify (partial evaluation).
+
+    Arithmetic over numbers folds (not a division by zero); a comparison between numbers becomes
+    ``true``/``false`` by the sign of its robustness (pass ``fold_predicates=False`` to keep its
+    finite robustness value instead); ``true``/``false`` propagate through not, and, or, implies
+    (iff/xor only when both sides are known), every unary temporal operator, ``until``/``since``
+    whose right side is false or left side true, and ``unless`` whose left side is true.
+    ``rise``/``fall`` are kept (their value at the first sample depends on the monitor).
+
+    Folding a temporal operator over a constant is exact wherever its window holds a sample; at
+    the end of a finite trace, where a truncated window can be empty, the monitor decides.
+    """
+    return _as_formula(_fold(formula, values, fold_predicates), fold_predicates)
+
+
+def fold_constants(formula: Node) -> Node:
+    """:func:`substitute` with no values: fold what the text already fixes."""
+    return substitute(formula, {})
+
+
+def fold_term(term: Node, values: Mapping[str, float] | None = None) -> Node:
+    """A term with the named values substituted and its arithmetic folded (a :class:`Num` when
+    it is constant)."""
+    return _fold(term, values or {}, True)
