@@ -1,0 +1,250 @@
+"""The runtime world: a loaded :class:`~twolevel.world.loader.Scenario` turned into arrays.
+
+``build_world(scenario)`` samples the map's lanes, builds the route (reference path, limits,
+desired speed), the tables of signs and lights, the participants (expanding populations with
+the seed) and their initial state. Everything here is frozen dataclasses and numpy arrays.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Mapping
+
+import numpy as np
+
+from twolevel.world.geometry import Lane, LaneSet, Route, concatenate, lane_from_reference, resample, sample_road
+from twolevel.world.loader import Scenario, _route_lanes, successors
+from twolevel.world.schema import ControllerSettings, IDMParams, MapFile, Placement
+from twolevel.world.traffic import (
+    CONSTANT_VELOCITY, GREEN, IDM, RED, SCRIPTED, STATIONARY, YELLOW, Lights, Participants, SpeedLimits,
+    StopLines, TrafficState,
+)
+
+__all__ = ["EgoStart", "Settings", "World", "build_world", "build_lanes"]
+
+_KINDS = {"stationary": STATIONARY, "constant_velocity": CONSTANT_VELOCITY, "idm": IDM, "scripted": SCRIPTED}
+_STATES = {"green": GREEN, "yellow": YELLOW, "red": RED}
+
+
+@dataclass(frozen=True)
+class EgoStart:
+    """The ego's initial state x, y [m], psi [rad], v [m/s], box [m] and vehicle overrides."""
+
+    x: float
+    y: float
+    psi: float
+    v: float
+    length: float
+    width: float
+    vehicle: Mapping[str, float]
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Controller and run settings (see :class:`~twolevel.world.schema.ControllerSettings`)."""
+
+    H: int
+    dt: float
+    r_near: float
+    r: float
+    D_safe: float
+    samples: int
+    time_limit: float
+    solver: str
+    stop_speed: float
+    yellow_decel: float
+    duration: float
+    seed: int
+
+
+@dataclass(frozen=True, eq=False)
+class World:
+    """Everything static about a scenario plus the initial traffic state."""
+
+    name: str
+    lanes: LaneSet
+    route: Route
+    limits: SpeedLimits
+    lights: Lights
+    stops: StopLines
+    parts: Participants
+    traffic0: TrafficState
+    ego: EgoStart
+    settings: Settings
+    rule_files: tuple[tuple[str, tuple[tuple[str, float], ...]], ...]
+    route_stops: np.ndarray  # (J,) route s [m] of stop signs on the route
+    route_stop_index: np.ndarray  # (J,) index into ``stops``
+    route_lights: np.ndarray  # (Q,) route s [m] of light stop lines on the route
+    route_light_index: np.ndarray  # (Q,) index into ``lights``
+
+
+def build_lanes(spec: MapFile) -> tuple[LaneSet, dict[str, int]]:
+    """All lanes of the map, sampled, with their index by id."""
+    ids = [ln.id for road in spec.roads for ln in road.lane_specs()]
+    index = {lid: i for i, lid in enumerate(ids)}
+    succ = successors(spec)
+    lanes: list[Lane] = []
+    for road in spec.roads:
+        ref = sample_road(road)
+        for ln in road.lane_specs():
+            lanes.append(lane_from_reference(ref, offset=ln.offset, direction=ln.direction, lane_id=ln.id,
+                                             index=index[ln.id], width=ln.width,
+                                             successors=tuple(index[s] for s in succ[ln.id])))
+    return LaneSet.of(tuple(lanes)), index
+
+
+def _limits(spec: MapFile, lanes: LaneSet, index: dict[str, int]) -> SpeedLimits:
+    lane_start = {ln.id: ln.speed_limit for road in spec.roads for ln in road.lane_specs()}
+    keys, vals = [], []
+    for lid, i in index.items():
+        keys.append(lanes.base[i] - 0.5)
+        vals.append(lane_start[lid] or spec.default_speed_limit)
+    for sign in spec.speed_limits:
+        keys.append(lanes.base[index[sign.lane]] + sign.s)
+        vals.append(sign.value)
+    order = np.argsort(keys, kind="stable")
+    return SpeedLimits(np.asarray(keys)[order], np.asarray(vals)[order], lanes.base)
+
+
+def _lights(spec: MapFile, index: dict[str, int]) -> Lights:
+    rows = []
+    for tl in spec.traffic_lights:
+        if tl.cycle is not None:
+            c = tl.cycle
+            rows.append(([0.0, c.green, c.green + c.yellow], [GREEN, YELLOW, RED], c.green + c.yellow + c.red, c.offset))
+        else:
+            rows.append(([st.t for st in tl.script or []], [_STATES[st.state] for st in tl.script or []], math.inf, 0.0))
+    width = max((len(r[0]) for r in rows), default=1)
+    times = np.full((len(rows), width), np.inf)
+    states = np.zeros((len(rows), width), dtype=int)
+    for i, (t, s, _, _) in enumerate(rows):
+        times[i, : len(t)] = t
+        states[i, : len(s)] = s
+        states[i, len(s):] = s[-1] if s else GREEN
+    return Lights(tuple(tl.id for tl in spec.traffic_lights),
+                  np.array([index[tl.lane] for tl in spec.traffic_lights], dtype=int),
+                  np.array([tl.s for tl in spec.traffic_lights], dtype=float), times, states,
+                  np.array([r[2] for r in rows], dtype=float), np.array([r[3] for r in rows], dtype=float))
+
+
+def _route(scn: Scenario, lanes: LaneSet, index: dict[str, int], limits: SpeedLimits) -> Route:
+    spec = scn.spec
+    names = _route_lanes(spec, successors(scn.map.spec)) or [spec.route.start.lane]
+    pieces = []
+    start = 0.0
+    for k, name in enumerate(names):
+        i = index[name]
+        a = spec.route.start.s if k == 0 else 0.0
+        b = spec.route.goal.s if k == len(names) - 1 else float(lanes.length[i])
+        pieces.append((i, a, b, start))
+        start += b - a
+    line = concatenate([(lanes.lanes[i], a, b) for i, a, b, _ in pieces])
+    s, pts, heading, kappa = resample(line, spec.route.spacing)
+    # limits in force along the route: the limit at each piece's start, then its signs
+    ls, lv = [], []
+    for i, a, b, s0 in pieces:
+        inner = (limits.key > limits.base[i] + a) & (limits.key <= limits.base[i] + b)
+        ls += [s0] + list(s0 + limits.key[inner] - limits.base[i] - a)
+        lv += [float(limits.at(np.array([i]), np.array([a]))[0])] + list(limits.value[inner])
+    limit_s, limit_v = np.asarray(ls), np.asarray(lv)
+    keep = np.append(np.diff(limit_s) > 0, True)  # a later breakpoint at the same s wins
+    limit_s, limit_v = limit_s[keep], limit_v[keep]
+    decel = 2.0  # [m/s²] comfortable deceleration shaping the desired speed
+    j = np.clip(np.searchsorted(limit_s, s, side="right") - 1, 0, len(limit_s) - 1)
+    v_des = limit_v[j].astype(float)
+    ahead = limit_s[None, :] - s[:, None]
+    env = np.sqrt(limit_v[None, :] ** 2 + 2 * decel * np.maximum(ahead, 0))
+    v_des = np.minimum(v_des, np.where(ahead > 0, env, np.inf).min(axis=1))
+    if spec.route.stop_at_goal:
+        v_des = np.minimum(v_des, np.sqrt(2 * decel * np.maximum(s[-1] - s, 0)))
+    if spec.ego.desired_speed is not None:
+        v_des = np.minimum(v_des, spec.ego.desired_speed)
+    bounds = np.array([p[3] for p in pieces] + [start])
+    width = lanes.width[np.array([p[0] for p in pieces])][np.clip(np.searchsorted(bounds, s, side="right") - 1, 0, len(pieces) - 1)]
+    return Route(pts, s, np.unwrap(heading), kappa, spacing=float(s[1] - s[0]) if len(s) > 1 else spec.route.spacing,
+                 limit_s=limit_s, limit_v=limit_v, v_des=v_des, width=width, pieces=tuple(pieces))
+
+
+def _pose(p: Placement, lanes: LaneSet, index: dict[str, int]) -> tuple[float, float, float, int, float, float]:
+    """x, y [m], psi [rad], lane index (−1), s [m], lateral [m] of a placement."""
+    if p.lane is not None:
+        i = index[p.lane]
+        s = p.s or 0.0
+        xy, h = lanes.pose(np.array([i]), np.array([s]), np.array([p.lateral]))
+        return float(xy[0, 0]), float(xy[0, 1]), float(h[0]), i, s, p.lateral
+    return float(p.x or 0.0), float(p.y or 0.0), math.radians(p.heading or 0.0), -1, 0.0, 0.0
+
+
+def _idm_row(p: IDMParams) -> list[float]:
+    return [math.nan if p.v0 is None else p.v0, p.T, p.s0, p.a, p.b, p.delta]
+
+
+def build_world(scn: Scenario) -> World:
+    """The runtime :class:`World` of a loaded scenario (deterministic for the run's seed)."""
+    spec = scn.spec
+    lanes, index = build_lanes(scn.map.spec)
+    limits = _limits(scn.map.spec, lanes, index)
+    lights = _lights(scn.map.spec, index)
+    m = scn.map.spec
+    stops = StopLines(tuple(s.id for s in m.stop_signs), np.array([index[s.lane] for s in m.stop_signs], dtype=int),
+                      np.array([s.s for s in m.stop_signs], dtype=float), np.array([s.stop_time for s in m.stop_signs], dtype=float))
+    route = _route(scn, lanes, index, limits)
+
+    rows: list[dict[str, object]] = []
+    for p in spec.participants:
+        x, y, psi, lane, s, lat = _pose(p.start, lanes, index) if p.start is not None else (0, 0, 0, -1, 0, 0)
+        wp = [(w.t, w.x, w.y) for w in p.waypoints or []]
+        if wp:
+            x, y = wp[0][1], wp[0][2]
+            psi = math.atan2(wp[1][2] - wp[0][2], wp[1][1] - wp[0][1])
+        rows.append(dict(id=p.id, kind=_KINDS[p.behaviour], x=x, y=y, psi=psi, v=p.speed, lane=lane, s=s, lat=lat,
+                         L=p.box.length, W=p.box.width, idm=_idm_row(p.idm), wp=wp))
+    ex, ey, epsi, elane, es, _ = _pose(spec.ego.start, lanes, index)
+    for pop in spec.populations:
+        rng = np.random.default_rng(spec.run.seed if pop.seed is None else pop.seed)
+        lane_ids = np.array([index[name] for name in pop.lanes])
+        per_lane = np.bincount(rng.integers(0, len(lane_ids), pop.count), minlength=len(lane_ids))
+        k = 0
+        for li, cnt in zip(lane_ids, per_lane):
+            lo, hi = pop.s_range or (0.0, float(lanes.length[li]))
+            hi = min(hi, float(lanes.length[li]))
+            pitch = pop.box.length + pop.min_gap
+            slots = np.arange(lo + pop.box.length / 2, hi - pop.box.length / 2 + 1e-9, pitch)
+            if li == elane:  # keep clear of the ego
+                slots = slots[np.abs(slots - es) > pitch]
+            take = np.sort(rng.choice(len(slots), size=min(cnt, len(slots)), replace=False)) if len(slots) else []
+            sv = slots[np.asarray(take, dtype=int)]
+            speeds = rng.uniform(*pop.speed_range, size=len(sv))
+            xy, h = lanes.pose(np.full(len(sv), li), sv)
+            for j in range(len(sv)):
+                rows.append(dict(id=f"{pop.id}-{k}", kind=_KINDS[pop.behaviour], x=xy[j, 0], y=xy[j, 1], psi=h[j],
+                                 v=0.0 if pop.behaviour == "stationary" else speeds[j], lane=li, s=sv[j], lat=0.0,
+                                 L=pop.box.length, W=pop.box.width, idm=_idm_row(pop.idm), wp=[]))
+                k += 1
+    n = len(rows)
+    wmax = max([len(r["wp"]) for r in rows] + [2])  # type: ignore[arg-type]
+    st = np.zeros((n, wmax))
+    sxy = np.zeros((n, wmax, 2))
+    for i, r in enumerate(rows):
+        wp = r["wp"] or [(0.0, r["x"], r["y"]), (1.0, r["x"], r["y"])]  # type: ignore[list-item]
+        arr = np.asarray(wp, dtype=float)
+        st[i, : len(arr)], sxy[i, : len(arr)] = arr[:, 0], arr[:, 1:]
+        st[i, len(arr):] = arr[-1, 0] + np.arange(1, wmax - len(arr) + 1)
+        sxy[i, len(arr):] = arr[-1, 1:]
+    col = lambda name, dtype=float: np.array([r[name] for r in rows], dtype=dtype).reshape(n)  # noqa: E731
+    parts = Participants(tuple(str(r["id"]) for r in rows), col("kind", int), col("L"), col("W"),
+                         np.array([r["idm"] for r in rows], dtype=float).reshape(n, 6), st, sxy)
+    traffic0 = TrafficState(0.0, col("x"), col("y"), col("psi"), col("v"), col("lane", int), col("s"), col("lat"),
+                            np.ones(n, dtype=bool), np.zeros(n), np.full(n, -1, dtype=int))
+    c: ControllerSettings = spec.controller
+    settings = Settings(c.H, c.dt, c.r_near, c.r, c.D_safe, c.samples, c.time_limit, c.solver, c.stop_speed,
+                        c.yellow_decel, spec.run.duration, spec.run.seed)
+    ego = EgoStart(ex, ey, epsi, spec.ego.speed, spec.ego.box.length, spec.ego.box.width,
+                   MappingProxyType(dict(spec.ego.vehicle)))
+    rs = route.from_lane(stops.lane, stops.s)
+    rl = route.from_lane(lights.lane, lights.s)
+    on_s, on_l = np.flatnonzero(~np.isnan(rs)), np.flatnonzero(~np.isnan(rl))
+    return World(spec.name or scn.path, lanes, route, limits, lights, stops, parts, traffic0, ego, settings,
+                 tuple((r.path, r.constants) for r in scn.rules), rs[on_s], on_s, rl[on_l], on_l)
