@@ -1,16 +1,17 @@
 """Throttle/brake γ ∈ [−1, 1] → wheel torques, and desired acceleration → γ.
 
-γ > 0 drives: the drive force at the wheels is γ·F_e(v) with the engine map
-F_e(v) = min(F_max, P_max / v) [N], split between the axles by ``rear_drive_share`` and
-between left and right equally, each wheel's share capped by its friction μ·D_x·Fz.
+γ > 0 drives: each driven wheel's force is γ·min(s_i·F_e(v), μ·D_x·Fz_i) with the engine map
+F_e(v) = min(F_max, P_max / v) [N] and s_i the wheel's share (``rear_drive_share`` between the
+axles, left and right equal): full throttle is capped at the tyre's grip (traction control),
+and drive, like brake, is proportional to γ.
 γ < 0 brakes: each wheel's brake torque is |γ|·min(T_b,max, η·μ·D_x·Fz·R_w) (η =
 ``brake_friction_use``), i.e. an ideal, load-proportional distribution just below the tyre's
 peak, so full braking decelerates at ≈ η·μ·g without locking the wheels.
 
-The wheel-torque map (:func:`wheel_torques`) is written on columns so that it runs on numpy
-arrays and on casadi SX expressions alike (``xp`` is :data:`twolevel.models.fourwheel.NP` or
-``CA``). The quasi-static maps (:func:`accel_from_gamma`, :func:`gamma_from_accel`) use the
-static axle loads and the road resistances; they are exact inverses of each other inside the
+Every function takes an ``xp`` namespace (:mod:`twolevel.models.ops`; numpy by default) so it
+runs on numpy arrays and on casadi SX expressions alike. The quasi-static maps (:func:`accel_from_gamma`, :func:`gamma_from_accel`) use the
+static axle loads, the road resistances and the wheels' spin inertia (effective mass
+m + 4·I_w/R_w²); they are exact inverses of each other inside the
 actuator range and are what the high-level MPC's acceleration a is turned into.
 """
 
@@ -25,8 +26,10 @@ from twolevel.models.params import G, VehicleParams
 
 __all__ = [
     "engine_force",
+    "tyre_grip",
     "wheel_torques",
     "resistance_force",
+    "effective_mass",
     "drive_force_available",
     "brake_force_available",
     "accel_from_gamma",
@@ -43,6 +46,13 @@ def engine_force(v: Any, p: VehicleParams, xp: Any = np) -> Any:
     return xp.fmin(p.engine_force_max, p.engine_power_max / xp.fmax(xp.fabs(v), _V_ENGINE))
 
 
+def tyre_grip(fz: Any, p: VehicleParams) -> Any:
+    """Load-sensitive effective load Fz·(1 − ε·(Fz − Fz0)/Fz0) [N], Fz0 = m·g/4: the tyre's peak
+    force is μ·D·tyre_grip(Fz) (ε = ``load_sensitivity``)."""
+    fz0 = 0.25 * p.m * G
+    return fz * (1.0 - p.load_sensitivity * (fz - fz0) / fz0)
+
+
 def wheel_torques(
     gamma: Any, vx: Any, fz: Sequence[Any], p: VehicleParams, xp: Any = np
 ) -> tuple[list[Any], list[Any]]:
@@ -54,60 +64,64 @@ def wheel_torques(
     g = xp.fmin(xp.fmax(gamma, -1.0), 1.0)
     throttle = xp.fmax(g, 0.0)
     brake = xp.fmax(-g, 0.0)
-    f_drive = throttle * engine_force(vx, p, xp)
+    f_engine = engine_force(vx, p, xp)
     shares = (0.5 * (1.0 - p.rear_drive_share),) * 2 + (0.5 * p.rear_drive_share,) * 2
-    grip = [p.mu * p.D_x * xp.fmax(fz_i, 0.0) for fz_i in fz]
-    drive = [xp.fmin(share * f_drive, grip_i) * p.R_w for share, grip_i in zip(shares, grip)]
+    grip = [p.mu * p.D_x * tyre_grip(xp.fmax(fz_i, 0.0), p) for fz_i in fz]
+    drive = [throttle * xp.fmin(share * f_engine, grip_i) * p.R_w for share, grip_i in zip(shares, grip)]
     brake_t = [
         brake * xp.fmin(p.brake_torque_max, p.brake_friction_use * grip_i * p.R_w) for grip_i in grip
     ]
     return drive, brake_t
 
 
-def _static_loads(p: VehicleParams) -> NDArray[np.float64]:
-    """Static normal load per wheel FL, FR, RL, RR [N]."""
-    front = p.m * G * p.b / p.wheelbase / 2.0
-    rear = p.m * G * p.a / p.wheelbase / 2.0
-    return np.array([front, front, rear, rear])
+def _loads(p: VehicleParams, ax: Any = 0.0) -> tuple[Any, Any, Any, Any]:
+    """Normal load per wheel FL, FR, RL, RR [N] at longitudinal acceleration ax [m/s²]."""
+    front = 0.5 * p.m * (G * p.b - ax * p.h_cg) / p.wheelbase
+    rear = 0.5 * p.m * (G * p.a + ax * p.h_cg) / p.wheelbase
+    return (front, front, rear, rear)
 
 
-def resistance_force(v: ArrayLike, p: VehicleParams) -> NDArray[np.float64]:
+def effective_mass(p: VehicleParams) -> float:
+    """Mass [kg] the longitudinal force accelerates: the car plus its four wheels' spin inertia."""
+    return p.m + 4.0 * p.I_w / p.R_w**2
+
+
+def resistance_force(v: Any, p: VehicleParams, xp: Any = np) -> Any:
     """Rolling resistance plus aerodynamic drag opposing the motion at speed v [m/s] → [N]."""
-    v = np.asarray(v, dtype=float)
-    return p.c_rr * p.m * G * np.tanh(v / V_RR) + 0.5 * p.rho_air * p.cd_area * v * np.abs(v)
+    return p.c_rr * p.m * G * xp.tanh(v / V_RR) + 0.5 * p.rho_air * p.cd_area * v * xp.fabs(v)
 
 
-def drive_force_available(v: ArrayLike, p: VehicleParams) -> NDArray[np.float64]:
-    """Drive force at γ = 1 and speed v [m/s] with static loads → [N]."""
-    fz = _static_loads(p)
-    v = np.asarray(v, dtype=float)
-    drive, _ = wheel_torques(np.ones_like(v), v, list(fz), p)
-    return np.sum(drive, axis=0) / p.R_w
+def drive_force_available(v: Any, p: VehicleParams, xp: Any = np, ax: Any = 0.0) -> Any:
+    """Drive force at γ = 1 and speed v [m/s] → [N], with the axle loads at acceleration ax [m/s²]."""
+    drive, _ = wheel_torques(1.0, v, _loads(p, ax), p, xp)
+    return (drive[0] + drive[1] + drive[2] + drive[3]) / p.R_w
 
 
 def brake_force_available(p: VehicleParams) -> float:
-    """Brake force at γ = −1 with static loads [N] (independent of speed)."""
-    fz = _static_loads(p)
-    _, brake = wheel_torques(-1.0, 0.0, list(fz), p)
+    """Brake force at γ = −1 [N] (independent of speed; with the ideal load-proportional brake
+    distribution it does not depend on the load transfer either)."""
+    _, brake = wheel_torques(-1.0, 0.0, _loads(p), p, np)
     return float(np.sum(brake)) / p.R_w
 
 
-def accel_from_gamma(gamma: ArrayLike, v: ArrayLike, p: VehicleParams) -> NDArray[np.float64]:
-    """Quasi-static longitudinal acceleration [m/s²] of a car moving forward at v [m/s] under γ."""
-    g = np.clip(np.asarray(gamma, dtype=float), -1.0, 1.0)
-    v = np.asarray(v, dtype=float)
-    force = (np.maximum(g, 0.0) * drive_force_available(v, p)
-             + np.minimum(g, 0.0) * brake_force_available(p) - resistance_force(v, p))
-    return force / p.m
+def accel_from_gamma(gamma: Any, v: Any, p: VehicleParams, xp: Any = np) -> Any:
+    """Quasi-static longitudinal acceleration [m/s²] of a car moving forward at v [m/s] under γ
+    (the drive's grip limit depends on the load transfer of the acceleration itself: solved by
+    fixed-point iteration, a contraction with rate ≈ μ·h_cg/L ≈ 0.2)."""
+    g = xp.fmin(xp.fmax(gamma, -1.0), 1.0)
+    brake = xp.fmin(g, 0.0) * brake_force_available(p) - resistance_force(v, p, xp)
+    a = brake / effective_mass(p)
+    for _ in range(25):
+        a = (xp.fmax(g, 0.0) * drive_force_available(v, p, xp, a) + brake) / effective_mass(p)
+    return a
 
 
-def gamma_from_accel(a: ArrayLike, v: ArrayLike, p: VehicleParams) -> NDArray[np.float64]:
+def gamma_from_accel(a: Any, v: Any, p: VehicleParams, xp: Any = np) -> Any:
     """γ ∈ [−1, 1] that gives the desired acceleration a [m/s²] at speed v [m/s] (vectorised).
 
     Inverse of :func:`accel_from_gamma`; a beyond what the car can do saturates at ±1.
     """
-    a = np.asarray(a, dtype=float)
-    v = np.asarray(v, dtype=float)
-    need = p.m * a + resistance_force(v, p)
-    gamma = np.where(need >= 0.0, need / drive_force_available(v, p), need / brake_force_available(p))
-    return np.clip(gamma, -1.0, 1.0)
+    need = effective_mass(p) * a + resistance_force(v, p, xp)
+    drive = drive_force_available(v, p, xp, xp.fmin(xp.fmax(a, -10.0), 10.0))  # loads at a feasible a
+    gamma = xp.where(need >= 0.0, need / drive, need / brake_force_available(p))
+    return xp.fmin(xp.fmax(gamma, -1.0), 1.0)

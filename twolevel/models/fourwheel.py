@@ -21,8 +21,8 @@ Physics:
 - Tyres: slip ratio κ = (ωR − v_l)/max(|v_l|, v_low) and tan α = −v_s/max(|v_l|, v_low) in each
   wheel's frame, so nothing divides by a vanishing wheel speed. Combined slip by the
   similarity (normalised-slip) method: σ = √(κ² + tan²α), F_x = κ/σ·F_x0(σ), F_y = tanα/σ·F_y0(σ),
-  with F_0(σ) = μ·D·Fz·sin(C·atan(Bσ − E(Bσ − atan Bσ))). The resultant therefore stays within
-  the friction ellipse μ·D_x·Fz × μ·D_y·Fz.
+  with F_0(σ) = μ·D·Fz·(1 − ε·dfz)·sin(C·atan(Bσ − E(Bσ − atan Bσ))), dfz = (Fz − Fz0)/Fz0 the
+  load sensitivity. The resultant therefore stays within the friction ellipse.
 - Wheels: I_w·ω̇ = T_drive − T_brake·sgn ω − R·F_x; the brake is a Coulomb torque that can hold
   a wheel locked but never spin it backwards.
 - Body: m(v̇x − r·vy) = ΣF_x − drag − rolling resistance, m(v̇y + r·vx) = ΣF_y, I_z ṙ = ΣM_z.
@@ -40,19 +40,19 @@ aggressive manoeuvre by millimetres to centimetres.
 
 The equations are written once on *columns* (one array per state component) with an ``xp``
 namespace, so the same code runs vectorised in numpy (:data:`NP`) and symbolically in casadi
-(:func:`casadi_ops`) for the compiled batched rollout (:mod:`twolevel.models.rollout`).
+(:func:`twolevel.models.ops.casadi_ops`) for the compiled batched rollout (:mod:`twolevel.models.rollout`).
 """
 
 from __future__ import annotations
 
 import math
-from types import SimpleNamespace
 from typing import Any, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from twolevel.models.actuation import V_RR, wheel_torques
+from twolevel.models.actuation import V_RR, tyre_grip, wheel_torques
+from twolevel.models.ops import NP, casadi_ops
 from twolevel.models.params import G, VehicleParams
 
 __all__ = ["NX", "NU", "NP", "casadi_ops", "initial_state", "substep", "substeps_per_step", "step",
@@ -60,23 +60,6 @@ __all__ = ["NX", "NU", "NP", "casadi_ops", "initial_state", "substep", "substeps
 
 NX = 12
 NU = 2
-NP = SimpleNamespace(
-    sin=np.sin, cos=np.cos, tan=np.tan, atan=np.arctan, tanh=np.tanh, sqrt=np.sqrt,
-    fmax=np.maximum, fmin=np.minimum, fabs=np.abs, sign=np.sign, where=np.where,
-)
-"""The numpy operations the model is written in."""
-
-
-def casadi_ops() -> SimpleNamespace:
-    """The same operations on casadi SX (imported lazily: casadi is heavy)."""
-    import casadi as ca
-
-    return SimpleNamespace(
-        sin=ca.sin, cos=ca.cos, tan=ca.tan, atan=ca.atan, tanh=ca.tanh, sqrt=ca.sqrt,
-        fmax=ca.fmax, fmin=ca.fmin, fabs=ca.fabs, sign=ca.sign, where=ca.if_else,
-    )
-
-
 def _magic(s: Any, fz: Any, B: float, C: float, D: float, E: float, mu: float, xp: Any) -> Any:
     """Magic Formula force [N] at slip s, normal load fz [N]."""
     bs = B * s
@@ -89,7 +72,7 @@ def tyre_forces_pure(kappa: ArrayLike, tan_alpha: ArrayLike, fz: ArrayLike, p: V
     k = np.asarray(kappa, dtype=float)
     t = np.asarray(tan_alpha, dtype=float)
     sig = np.sqrt(k * k + t * t + 1e-12)
-    fz = np.asarray(fz, dtype=float)
+    fz = tyre_grip(np.asarray(fz, dtype=float), p)
     fx = k / sig * _magic(sig, fz, p.B_x, p.C_x, p.D_x, p.E_x, p.mu, NP)
     fy = t / sig * _magic(sig, fz, p.B_y, p.C_y, p.D_y, p.E_y, p.mu, NP)
     return fx, fy
@@ -122,6 +105,7 @@ def substep(s: Sequence[Any], delta: Any, gamma: Any, h: float, p: VehicleParams
     lat_f = p.m * ay_l * p.h_cg / p.T_f * (p.b / L)
     lat_r = p.m * ay_l * p.h_cg / p.T_r * (p.a / L)
     fz = [xp.fmax(q, 0.0) for q in (0.5 * fz_f - lat_f, 0.5 * fz_f + lat_f, 0.5 * fz_r - lat_r, 0.5 * fz_r + lat_r)]
+    grip = [tyre_grip(fz_i, p) for fz_i in fz]  # load-sensitive effective loads
 
     t_drive, t_brake = wheel_torques(gamma, vx, fz, p, xp)
     cd, sd = xp.cos(delta), xp.sin(delta)
@@ -146,8 +130,8 @@ def substep(s: Sequence[Any], delta: Any, gamma: Any, h: float, p: VehicleParams
         kappa = (omega[i] * p.R_w - vl) / vden
         tan_a = -vs / vden
         sig = xp.sqrt(kappa * kappa + tan_a * tan_a + 1e-12)
-        gx = _magic(sig, fz[i], p.B_x, p.C_x, p.D_x, p.E_x, p.mu, xp) / sig  # secant stiffness [N]
-        gy = _magic(sig, fz[i], p.B_y, p.C_y, p.D_y, p.E_y, p.mu, xp) / sig
+        gx = _magic(sig, grip[i], p.B_x, p.C_x, p.D_x, p.E_x, p.mu, xp) / sig  # secant stiffness [N]
+        gy = _magic(sig, grip[i], p.B_y, p.C_y, p.D_y, p.E_y, p.mu, xp) / sig
         fx = kappa * gx
         fy = tan_a * gy
         if i < 2:

@@ -158,6 +158,10 @@ class VehicleParams:
     """Lateral peak factor [-], times μ·Fz. [PAC]."""
     E_y: float = 0.97
     """Lateral curvature factor [-]. [PAC]."""
+    load_sensitivity: float = 0.1
+    """Peak friction falls with load: D·(1 − ε·(Fz − Fz0)/Fz0), Fz0 = m·g/4 [-]. Pacejka's
+    p_Dx2/p_Dy2 ≈ −0.1 for passenger tyres; it is what makes the front-heavy car understeer
+    (with cornering stiffness ∝ Fz alone it would be neutral). 0 gives the plain formula."""
 
     # --- resistances -------------------------------------------------------------------------
     c_rr: float = 0.013
@@ -210,7 +214,7 @@ class VehicleParams:
         for name in ("c_rr", "rho_air", "cd_area", "h_cg", "brake_torque_max"):
             if getattr(self, name) < 0:
                 raise InvalidParameterError(name, getattr(self, name), "must be ≥ 0")
-        for name in ("rear_drive_share", "brake_friction_use"):
+        for name in ("rear_drive_share", "brake_friction_use", "load_sensitivity"):
             if not 0 <= getattr(self, name) <= 1:
                 raise InvalidParameterError(name, getattr(self, name), "must be in [0, 1]")
         if self.h_int > 0.02:

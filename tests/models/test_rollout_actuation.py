@@ -1,0 +1,94 @@
+"""Batched rollouts (backends agree, boxes follow poses), actuation maps, parameter overrides."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from twolevel.models import actuation as act, fourwheel as fw
+from twolevel.models.obb import box_corners
+from twolevel.models.params import BicycleParams, InvalidParameterError, UnknownParameterError, VehicleParams
+from twolevel.models.rollout import compiled_available, rollout, rollout_accel
+
+P = VehicleParams()
+
+
+def _controls(K: int, H: int, seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return np.stack([rng.uniform(-0.3, 0.3, (K, H)), rng.uniform(-1, 1, (K, H))], axis=-1)
+
+
+@pytest.mark.parametrize("backend", ["casadi", "casadi-vm"])
+def test_casadi_backends_match_numpy(backend: str) -> None:
+    x0 = fw.initial_state(v=12.0)
+    u = _controls(5, 10)
+    ref = rollout(x0, u, 0.1, P, backend="numpy")
+    got = rollout(x0, u, 0.1, P, backend=backend)
+    np.testing.assert_allclose(got.states, ref.states, atol=1e-9)
+    ua = np.stack([u[..., 0], 4 * u[..., 1]], axis=-1)
+    np.testing.assert_allclose(rollout_accel(x0, ua, 0.1, P, backend=backend).states,
+                               rollout_accel(x0, ua, 0.1, P, backend="numpy").states, atol=1e-9)
+
+
+def test_rollout_shapes_and_boxes() -> None:
+    r = rollout(fw.initial_state(v=8.0), _controls(3, 10), 0.1, P)
+    assert r.states.shape == (3, 11, fw.NX) and r.boxes.shape == (3, 11, 4, 2)
+    np.testing.assert_allclose(r.states[:, 0], np.broadcast_to(fw.initial_state(v=8.0), (3, fw.NX)))
+    s = r.states
+    np.testing.assert_allclose(r.boxes, box_corners(s[..., 0], s[..., 1], s[..., 2], 4.22, 1.8))
+    np.testing.assert_allclose(r.boxes.mean(axis=-2), s[..., :2], atol=1e-12)  # centred on the CoG
+
+
+def test_rollout_rejects_bad_shapes() -> None:
+    with pytest.raises(ValueError):
+        rollout(np.zeros(4), _controls(1, 10), 0.1)
+    with pytest.raises(ValueError):
+        rollout(fw.initial_state(), np.zeros((2, 10, 3)), 0.1)
+
+
+def test_compiled_backend_is_available_here() -> None:
+    assert compiled_available()  # gcc is installed on the project's machines
+
+
+def test_accel_round_trip_and_saturation() -> None:
+    v = np.linspace(1.0, 30.0, 30)
+    a = np.linspace(-8.5, 2.5, 30)  # inside what the car can do at every speed here
+    np.testing.assert_allclose(act.accel_from_gamma(act.gamma_from_accel(a, v, P), v, P), a, atol=1e-9)
+    assert np.all(act.gamma_from_accel(np.full(3, 50.0), np.array([1.0, 10.0, 30.0]), P) == 1.0)
+    assert act.gamma_from_accel(-50.0, 10.0, P) == -1.0
+    full_brake = act.accel_from_gamma(-1.0, 10.0, P)
+    assert -0.97 * P.mu * 9.81 < full_brake < -0.9 * P.mu * 9.81
+
+
+def test_closed_loop_acceleration_tracks_the_command() -> None:
+    x0 = fw.initial_state(v=10.0)
+    for a in (-6.0, -2.0, 1.0, 3.0):
+        s = rollout_accel(x0, np.tile([0.0, a], (1, 10, 1)), 0.1, P).states[0]
+        achieved = np.diff(s[3:, 3]) / 0.1  # after the first 0.2 s of load-transfer lag
+        np.testing.assert_allclose(achieved, a, rtol=0.03, atol=0.03)
+
+
+def test_wheel_torques_respect_friction_and_limits() -> None:
+    fz = [3000.0, 3000.0, 2500.0, 2500.0]
+    drive, brake = act.wheel_torques(1.0, 5.0, fz, P)
+    assert drive[0] == 0.0 and drive[1] == 0.0  # rear-wheel drive
+    assert all(d / P.R_w <= P.mu * act.tyre_grip(f, P) + 1e-9 for d, f in zip(drive, fz))
+    drive, brake = act.wheel_torques(-1.0, 5.0, fz, P)
+    assert all(d == 0.0 for d in drive)
+    assert all(0.0 < b <= P.brake_torque_max for b in brake)
+    assert all(b / P.R_w <= P.brake_friction_use * P.mu * act.tyre_grip(f, P) + 1e-9 for b, f in zip(brake, fz))
+
+
+def test_overrides() -> None:
+    p = P.with_overrides({"mu": 0.5, "m": 1500})
+    assert p.mu == 0.5 and p.m == 1500.0 and P.mu == 1.0
+    with pytest.raises(UnknownParameterError) as err:
+        P.with_overrides({"muu": 0.5})
+    assert err.value.suggestion == "mu" and "did you mean 'mu'" in str(err.value)
+    with pytest.raises(InvalidParameterError):
+        P.with_overrides({"m": -3})
+    with pytest.raises(InvalidParameterError):
+        P.with_overrides({"m": "heavy"})
+    assert BicycleParams().with_overrides({"l_f": 2.5}).l_f == 2.5
+    with pytest.raises(UnknownParameterError):
+        BicycleParams().with_overrides({"wheelbase": 2.5})
