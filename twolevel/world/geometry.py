@@ -91,11 +91,12 @@ class Polyline:
         rel = flat[:, None, :] - a[None, :, :]  # (M, K, 2)
         safe = np.where(l2 > 0, l2, 1.0)
         t_raw = np.einsum("mkj,kj->mk", rel, d) / safe
-        t = np.clip(t_raw, 0.0, 1.0)
+        low, high = np.zeros(len(l2)), np.ones(len(l2))
         if lo == 0:
-            t[:, 0] = np.minimum(t_raw[:, 0], 1.0)
+            low[0] = -np.inf
         if hi == len(self.s) - 1:
-            t[:, -1] = np.maximum(t_raw[:, -1], 0.0)
+            high[-1] = np.inf
+        t = np.clip(t_raw, low, high)
         diff = rel - t[..., None] * d[None]
         dist2 = np.einsum("mkj,mkj->mk", diff, diff)
         dist2 = np.where(l2[None, :] > 0, dist2, np.inf)
@@ -344,9 +345,7 @@ class Route(Polyline):
         l2 = np.einsum("mkj,mkj->mk", d, d)
         rel = pts[:, None, :] - a
         t_raw = np.einsum("mkj,mkj->mk", rel, d) / np.where(l2 > 0, l2, 1.0)
-        t = np.clip(t_raw, 0.0, 1.0)
-        t[:, 0] = np.where(idx[:, 0] == 0, np.minimum(t_raw[:, 0], 1.0), t[:, 0])
-        t[:, -1] = np.where(idx[:, -1] == n - 1, np.maximum(t_raw[:, -1], 0.0), t[:, -1])
+        t = np.clip(t_raw, np.where(idx == 0, -np.inf, 0.0), np.where(idx == n - 1, np.inf, 1.0))
         diff = rel - t[..., None] * d
         dist2 = np.einsum("mkj,mkj->mk", diff, diff)
         k = np.argmin(dist2, axis=1)

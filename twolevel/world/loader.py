@@ -22,7 +22,7 @@ from pydantic import BaseModel, ValidationError
 
 from twolevel.diagnostics import Diagnostic, Span
 from twolevel.world.codes import (
-    YML410, YML411, YML412, YML413, YML414, YML415, YML416, YML417, YML418, YML419, YML420,
+    YML410, YML411, YML412, YML413, YML414, YML415, YML416, YML417, YML418, YML419, YML420, YML421,
 )
 from twolevel.world.document import Document, Path_, read_document
 from twolevel.world.schema import MapFile, ScenarioFile, lane_length
@@ -379,6 +379,19 @@ def _check_scenario(spec: ScenarioFile, doc: Document, m: MapFile) -> list[Diagn
             out += _check_lane_pos(p.start.lane, p.start.s, ("participants", i, "start"), doc, lengths)
     for i, pop in enumerate(spec.populations):
         ids.append((pop.id, ("populations", i, "id")))
+        if all(lane in lengths for lane in pop.lanes):
+            pitch = pop.box.length + pop.min_gap
+            room = 0
+            for lane in pop.lanes:
+                lo, hi = pop.s_range or (0.0, lengths[lane])
+                span = min(hi, lengths[lane]) - lo - pop.box.length
+                room += int(span // pitch) + 1 if span >= 0 else 0
+                if lane == spec.ego.start.lane:
+                    room -= 2
+            if pop.count > room:
+                out.append(YML421(f"room for about {max(room, 0)} vehicles of {pop.count} on these lanes; the rest are left out",
+                                  doc.locate(("populations", i, "count"), value=True),
+                                  hint="lower 'min_gap', widen 's_range' or add lanes"))
         for k, lane in enumerate(pop.lanes):
             if lane not in lengths:
                 out.append(YML416(f"no lane '{lane}' in the map", doc.locate(("populations", i, "lanes", k), value=True),
@@ -473,13 +486,22 @@ def _lint_rules(rule_files: Iterable[RuleFile], spec: ScenarioFile) -> list[Diag
     if not files:
         return out
     try:
-        from twolevel.stl.lint import check_file  # lazy: written in parallel, heavy-free
+        from twolevel.stl.lint import check_file, load_ruleset  # lazy: heavy-free, owned by the STL package
     except ImportError:
         return out
     from twolevel.world.provided import PROVIDED_SIGNALS
 
     for rf in files:
-        result = check_file(_display(Path(rf.path)), dt=spec.controller.dt, horizon=spec.controller.H,
-                            provided_signals=PROVIDED_SIGNALS)
-        out += list(result.diagnostics)
+        shown = _display(Path(rf.path))
+        result = check_file(shown, dt=spec.controller.dt, horizon=spec.controller.H, provided_signals=PROVIDED_SIGNALS)
+        diags = list(result.diagnostics)
+        if rf.constants and not any(d.is_error for d in diags):
+            # bindings the file does not declare (reported by the rule loader)
+            _, bound = load_ruleset(shown, dict(rf.constants), dt=spec.controller.dt, provided_signals=PROVIDED_SIGNALS)
+            seen = {(d.code, d.span, d.message) for d in diags}
+            for d in bound:
+                if (d.code, d.span, d.message) not in seen:
+                    diags.append(d if d.span.file != shown or d.code != "STL219" else
+                                 type(d)(d.code, d.severity, d.message, rf.span, d.hint))
+        out += diags
     return out

@@ -15,7 +15,8 @@ Definitions (sensing is limited to ``r_near``):
 * Stop signs. A stop line on the route at s_j *applies* at a step while the ego is within
   −PASS_MARGIN ≤ s_j − s ≤ r_near and has not yet *served* it. The ego serves it at the first step
   at which it has stood still (v ≤ stop_speed) without interruption for the sign's ``stop_time``
-  while within that zone; from that step on the line no longer applies. ``d_stop`` = s_j − s of
+  close to the line (−PASS_MARGIN ≤ s_j − s ≤ STOP_ZONE); from that step on the line no longer
+  applies. ``d_stop`` = s_j − s of
   the nearest line that applies, +inf if none (so it turns negative if the ego runs the line).
 * Lights. A light on the route applies while 0 ≤ s_j − s ≤ r_near; once the ego has crossed its
   line the light no longer applies, unless it crossed while the light was red, in which case it
@@ -41,10 +42,11 @@ from twolevel.world.provided import PROVIDED_SIGNALS
 from twolevel.world.traffic import RED, YELLOW, TrafficState
 from twolevel.world.world import World
 
-__all__ = ["PROVIDED_SIGNALS", "PASS_MARGIN", "TrafficLog", "StopMemory", "HorizonConstants", "signals_along",
+__all__ = ["PROVIDED_SIGNALS", "PASS_MARGIN", "STOP_ZONE", "TrafficLog", "StopMemory", "HorizonConstants", "signals_along",
            "horizon_constants", "update_stop_memory"]
 
 PASS_MARGIN = 5.0  # [m] how far past a stop line it still counts (so running it is visible)
+STOP_ZONE = 3.0  # [m] a stop counts for a stop sign when made at most this far before its line
 
 
 @dataclass(frozen=True, eq=False)
@@ -85,7 +87,7 @@ def update_stop_memory(mem: StopMemory, world: World, s: float, v: float, dt: fl
     incremental form of :func:`signals_along`'s stop-sign definition)."""
     d = world.route_stops - s
     need = world.stops.stop_time[world.route_stop_index]
-    cond = (v <= world.settings.stop_speed) & (d >= -PASS_MARGIN) & (d <= world.settings.r_near)
+    cond = (v <= world.settings.stop_speed) & (d >= -PASS_MARGIN) & (d <= STOP_ZONE)
     still = np.where(cond, np.where(np.asarray(mem.still) >= 0, np.asarray(mem.still) + dt, 0.0), -1.0)
     served = np.asarray(mem.served, dtype=bool) | (cond & (still >= need - 1e-9))
     return StopMemory(tuple(bool(b) for b in served), tuple(float(x) for x in still))
@@ -97,7 +99,7 @@ def _stop_distance(world: World, s: np.ndarray, v: np.ndarray, dt: float) -> np.
         return np.full(len(s), np.inf)
     d = world.route_stops[None, :] - s[:, None]  # (T, J)
     zone = (d >= -PASS_MARGIN) & (d <= r_near)
-    cond = (v <= world.settings.stop_speed)[:, None] & zone
+    cond = (v <= world.settings.stop_speed)[:, None] & (d >= -PASS_MARGIN) & (d <= STOP_ZONE)
     idx = np.arange(len(s))[:, None]
     last_false = np.maximum.accumulate(np.where(~cond, idx, -1), axis=0)
     duration = (idx - (last_false + 1)) * dt

@@ -16,13 +16,13 @@ import numpy as np
 
 from twolevel.world.geometry import Lane, LaneSet, Route, concatenate, lane_from_reference, resample, sample_road
 from twolevel.world.loader import Scenario, _route_lanes, successors
-from twolevel.world.schema import ControllerSettings, IDMParams, MapFile, Placement
+from twolevel.world.schema import ControllerSettings, IDMParams, MapFile, Placement, Population
 from twolevel.world.traffic import (
     CONSTANT_VELOCITY, GREEN, IDM, RED, SCRIPTED, STATIONARY, YELLOW, Lights, Participants, SpeedLimits,
     StopLines, TrafficState,
 )
 
-__all__ = ["EgoStart", "Settings", "World", "build_world", "build_lanes"]
+__all__ = ["EgoStart", "Settings", "World", "build_world", "build_lanes", "population_slots"]
 
 _KINDS = {"stationary": STATIONARY, "constant_velocity": CONSTANT_VELOCITY, "idm": IDM, "scripted": SCRIPTED}
 _STATES = {"green": GREEN, "yellow": YELLOW, "red": RED}
@@ -177,6 +177,24 @@ def _pose(p: Placement, lanes: LaneSet, index: dict[str, int]) -> tuple[float, f
     return float(p.x or 0.0), float(p.y or 0.0), math.radians(p.heading or 0.0), -1, 0.0, 0.0
 
 
+def population_slots(pop: Population, lanes: LaneSet, index: dict[str, int], ego_lane: int, ego_s: float
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Places a population may use: (lane index, s [m]) one box length + ``min_gap`` apart along
+    each of its lanes within ``s_range``, keeping that pitch clear of the ego."""
+    pitch = pop.box.length + pop.min_gap
+    ls, ss = [], []
+    for name in pop.lanes:
+        li = index[name]
+        lo, hi = pop.s_range or (0.0, float(lanes.length[li]))
+        hi = min(hi, float(lanes.length[li]))
+        slots = np.arange(lo + pop.box.length / 2, hi - pop.box.length / 2 + 1e-9, pitch)
+        if li == ego_lane:
+            slots = slots[np.abs(slots - ego_s) >= pitch]
+        ls.append(np.full(len(slots), li))
+        ss.append(slots)
+    return np.concatenate(ls).astype(int), np.concatenate(ss)
+
+
 def _idm_row(p: IDMParams) -> list[float]:
     return [math.nan if p.v0 is None else p.v0, p.T, p.s0, p.a, p.b, p.delta]
 
@@ -204,25 +222,15 @@ def build_world(scn: Scenario) -> World:
     ex, ey, epsi, elane, es, _ = _pose(spec.ego.start, lanes, index)
     for pop in spec.populations:
         rng = np.random.default_rng(spec.run.seed if pop.seed is None else pop.seed)
-        lane_ids = np.array([index[name] for name in pop.lanes])
-        per_lane = np.bincount(rng.integers(0, len(lane_ids), pop.count), minlength=len(lane_ids))
-        k = 0
-        for li, cnt in zip(lane_ids, per_lane):
-            lo, hi = pop.s_range or (0.0, float(lanes.length[li]))
-            hi = min(hi, float(lanes.length[li]))
-            pitch = pop.box.length + pop.min_gap
-            slots = np.arange(lo + pop.box.length / 2, hi - pop.box.length / 2 + 1e-9, pitch)
-            if li == elane:  # keep clear of the ego
-                slots = slots[np.abs(slots - es) > pitch]
-            take = np.sort(rng.choice(len(slots), size=min(cnt, len(slots)), replace=False)) if len(slots) else []
-            sv = slots[np.asarray(take, dtype=int)]
-            speeds = rng.uniform(*pop.speed_range, size=len(sv))
-            xy, h = lanes.pose(np.full(len(sv), li), sv)
-            for j in range(len(sv)):
-                rows.append(dict(id=f"{pop.id}-{k}", kind=_KINDS[pop.behaviour], x=xy[j, 0], y=xy[j, 1], psi=h[j],
-                                 v=0.0 if pop.behaviour == "stationary" else speeds[j], lane=li, s=sv[j], lat=0.0,
-                                 L=pop.box.length, W=pop.box.width, idm=_idm_row(pop.idm), wp=[]))
-                k += 1
+        slot_lane, slot_s = population_slots(pop, lanes, index, elane, es)
+        take = np.sort(rng.choice(len(slot_s), size=min(pop.count, len(slot_s)), replace=False))
+        li, sv = slot_lane[take], slot_s[take]
+        speeds = rng.uniform(*pop.speed_range, size=len(sv))
+        xy, h = lanes.pose(li, sv)
+        for j in range(len(sv)):
+            rows.append(dict(id=f"{pop.id}-{j}", kind=_KINDS[pop.behaviour], x=xy[j, 0], y=xy[j, 1], psi=h[j],
+                             v=0.0 if pop.behaviour == "stationary" else speeds[j], lane=li[j], s=sv[j], lat=0.0,
+                             L=pop.box.length, W=pop.box.width, idm=_idm_row(pop.idm), wp=[]))
     n = len(rows)
     wmax = max([len(r["wp"]) for r in rows] + [2])  # type: ignore[arg-type]
     st = np.zeros((n, wmax))
