@@ -13,9 +13,11 @@ Backends (same equations, :mod:`twolevel.models.fourwheel`, agree to 1e-12):
   working compiler it falls back to casadi's SX virtual machine (≈ 3× slower).
 - ``"numpy"``: the substep vectorised over K, looping over H × substeps in Python.
 
-``"auto"`` (the default) is casadi. Measured on this 2-core machine (H = 10, dt = 0.1 s,
-h = 5 ms, i.e. 200 substeps; ``benchmarks/rollout.py``): K = 1: 0.18 ms compiled, 0.44 ms VM,
-53 ms numpy; K = 64: 7.4 / 26 / 60 ms; K = 256: 28 / 102 / 82 ms.
+``"auto"`` (the default) is casadi, compiled when possible. Measured on this 2-core machine
+(H = 10, dt = 0.1 s, h = 5 ms, i.e. 200 substeps; ``benchmarks/rollout.py``; ranges over runs
+with other jobs sharing the cores), compiled / VM / numpy: K = 1: 0.18–0.35 / 0.44–0.8 /
+53–126 ms; K = 64: 7.4–16.5 / 26–37 / 60–170 ms; K = 256: 28–57 / 102–224 / 82–223 ms.
+The first call per (parameters, dt, H, K) builds the functions (≈ 0.3 s with the compile).
 """
 
 from __future__ import annotations
