@@ -51,20 +51,18 @@ def format_number(x: float) -> str:
     return repr(x)
 
 
-def _bound(x: float, unit: str) -> str:
-    if not math.isfinite(x):
-        raise ValueError("an unbounded interval is written without brackets")
-    if unit == "ms":
-        ms = x * 1000.0
-        if float(format_number(ms)) / 1000.0 == x:
-            return format_number(ms) + "ms"
-        return format_number(x) + "s"
-    return format_number(x) + unit
+def _exact_ms(x: float) -> bool:
+    return math.isfinite(x * 1000.0) and float(format_number(x * 1000.0)) / 1000.0 == x
 
 
 def format_interval(iv: Interval) -> str:
-    """``[lo:hi]`` in the interval's unit when exact, else in seconds."""
-    return f"[{_bound(iv.lo, iv.unit)}:{_bound(iv.hi, iv.unit)}]"
+    """``[lo:hi]`` in the interval's unit when exact for both bounds, else in seconds."""
+    if not (math.isfinite(iv.lo) and math.isfinite(iv.hi)):
+        raise ValueError("an unbounded interval is written without brackets")
+    if iv.unit == "ms" and _exact_ms(iv.lo) and _exact_ms(iv.hi):
+        return f"[{format_number(iv.lo * 1000.0)}ms:{format_number(iv.hi * 1000.0)}ms]"
+    unit = "s" if iv.unit in ("s", "ms") else ""
+    return f"[{format_number(iv.lo)}{unit}:{format_number(iv.hi)}{unit}]"
 
 
 def _level(node: Node) -> int:
