@@ -63,6 +63,7 @@ def future_window(x: np.ndarray, a: int, b: int | None, kind: Kind) -> np.ndarra
         acc = op.accumulate(x[::-1])[::-1]
         out[: n - a] = acc[a:]
         return out
+    b = min(b, n + a)  # samples beyond the trace are neutral: a longer window changes nothing
     width = b - a + 1
     padded = np.full(n + b + 1, ident)
     padded[:n] = x

@@ -1,0 +1,418 @@
+"""Recorded drives as CSV: reading them, and monitoring rules over them (``twolevel monitor``).
+
+A trace CSV has a header row, a time column ``t`` (or ``time``) in seconds and one column per
+signal [SI units]; each further row is one sample. The time column must increase strictly and be
+uniform (spacing within 1 % of its median) unless a period ``dt`` is given, which then decides
+(and makes the time column optional: sample ``k`` is at ``k * dt``). Every problem is a
+:class:`~twolevel.diagnostics.Diagnostic` with the file, line and column, never an exception.
+
+The file is streamed: cells go straight into typed arrays (8 bytes per number), so a large file
+costs about its numeric size in memory.
+
+JSON (:func:`to_json`): ``{"rules": [{"name", "robustness", "satisfied", "first_violation_t"}]}``
+(+ ``"series"`` per rule when asked). ``robustness`` is the value at the first sample; infinite
+values (``true``, empty windows) are written as the strings ``"inf"`` / ``"-inf"``, NaN as
+``null``; ``first_violation_t`` is in seconds from the time column, or ``null``.
+"""
+
+from __future__ import annotations
+
+import csv
+import difflib
+import math
+import os
+from array import array
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from twolevel.diagnostics import Diagnostic, Severity, Span
+from twolevel.monitor.codes import SIM601, SIM602, SIM603, SIM604, SIM605, SIM606, SIM607, SIM608
+from twolevel.monitor.errors import MonitorError
+from twolevel.monitor.robustness import DEFAULT_BUILTINS, Builtin, robustness
+from twolevel.stl import ast
+
+__all__ = [
+    "Trace",
+    "RuleVerdict",
+    "MonitorReport",
+    "read_trace",
+    "monitor_trace",
+    "consts_of",
+    "to_json",
+]
+
+TIME_COLUMNS = ("t", "time")
+SPACING_TOLERANCE = 0.01  # relative to the period
+ONE_ROW_DT = 0.1  # [s] assumed when a one-row trace gives no period and none is given
+MAX_CELL_ERRORS = 20
+BUILTIN_SIGNALS: Mapping[str, tuple[str, ...]] = {"collision_free": ("min_gap",)}
+
+
+@dataclass(frozen=True, eq=False)
+class Trace:
+    """A uniformly sampled recording: times ``t`` [s], signal columns (not the time), period ``dt`` [s]."""
+
+    path: str
+    t: np.ndarray
+    columns: Mapping[str, np.ndarray]
+    dt: float
+
+    @property
+    def samples(self) -> int:
+        return int(self.t.shape[0])
+
+
+@dataclass(frozen=True, eq=False)
+class RuleVerdict:
+    """One rule over a trace: robustness at the first sample, whether it holds there (≥ 0), the
+    first time [s] its robustness signal is negative (``None`` if never), and the signal itself
+    if asked for."""
+
+    name: str
+    robustness: float
+    satisfied: bool
+    first_violation_t: float | None
+    series: np.ndarray | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class MonitorReport:
+    """Every evaluated rule, in the rule file's order."""
+
+    trace: str
+    dt: float
+    samples: int
+    rules: tuple[RuleVerdict, ...] = field(default_factory=tuple)
+
+    @property
+    def violated(self) -> bool:
+        """True if some rule is violated at the first sample or later (the CLI's exit 1)."""
+        return any(not r.satisfied or r.first_violation_t is not None for r in self.rules)
+
+
+# --------------------------------------------------------------------------------- reading
+
+
+def _cell_column(row: Sequence[str], j: int) -> int:
+    """1-based character column of cell ``j`` (exact for unquoted rows)."""
+    return 1 + sum(len(c) + 1 for c in row[:j])
+
+
+def _read_rows(path: str, diags: list[Diagnostic]) -> tuple[list[str], list[array], list[int]] | None:
+    """Stream the CSV: header names, one typed array per column, the file line of every row."""
+    whole = Span.whole_file(path)
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(8192)
+    except FileNotFoundError:
+        diags.append(SIM605(f"trace file '{path}' does not exist", whole, hint="check the path"))
+        return None
+    except IsADirectoryError:
+        diags.append(SIM605(f"'{path}' is a directory, not a trace file", whole))
+        return None
+    except OSError as exc:
+        diags.append(SIM605(f"cannot read trace file '{path}': {exc.strerror or exc}", whole))
+        return None
+    if b"\x00" in head:
+        diags.append(SIM605("the trace file is binary (it contains NUL bytes), not CSV text", whole))
+        return None
+    if not head.strip():
+        diags.append(SIM604("the trace file is empty: expected a header row such as 't,v,v_max'", whole))
+        return None
+    header: list[str] | None = None
+    cols: list[array] = []
+    lines = array("l")
+    errors = 0
+    line = 0
+    try:
+        with open(path, encoding="utf-8-sig", newline="") as fh:
+            reader = csv.reader(fh)
+            for row in reader:
+                line = reader.line_num
+                if not row or all(not c.strip() for c in row):
+                    continue
+                if header is None:
+                    header = [c.strip() for c in row]
+                    cols = [array("d") for _ in header]
+                    if not _check_header(path, line, row, header, diags):
+                        return None
+                    continue
+                if len(row) != len(header):
+                    diags.append(
+                        SIM603(
+                            f"row has {len(row)} cells but the header has {len(header)} columns",
+                            Span(path, line, 1, line, 1 + len(",".join(row))),
+                        )
+                    )
+                    errors += 1
+                else:
+                    for j, cell in enumerate(row):
+                        text = cell.strip()
+                        try:
+                            value = float(text)
+                        except ValueError:
+                            value = math.nan
+                            what = "is empty" if not text else f"'{text[:40]}' is not a number"
+                        else:
+                            what = f"is {text}" if not math.isfinite(value) else ""
+                        if what:
+                            col = _cell_column(row, j)
+                            diags.append(
+                                SIM603(
+                                    f"cell in column '{header[j]}' {what}",
+                                    Span(path, line, col, line, col + max(len(cell), 1)),
+                                    hint="every cell must be a finite number (NaN and inf are not allowed)",
+                                )
+                            )
+                            errors += 1
+                        cols[j].append(value)
+                    lines.append(line)
+                if errors >= MAX_CELL_ERRORS:
+                    diags.append(SIM603(f"stopped after {errors} bad rows", Span(path, line, 1)))
+                    return None
+    except UnicodeDecodeError:
+        diags.append(SIM605(f"the trace file is not valid UTF-8 (after line {line})", Span(path, line + 1, 1)))
+        return None
+    except (csv.Error, OSError) as exc:
+        diags.append(SIM605(f"cannot read the trace file: {exc}", Span(path, max(line, 1), 1)))
+        return None
+    if header is None:
+        diags.append(SIM604("the trace file is empty: expected a header row such as 't,v,v_max'", whole))
+        return None
+    if errors:
+        return None
+    return header, cols, list(lines)
+
+
+def _check_header(path: str, line: int, row: list[str], header: list[str], diags: list[Diagnostic]) -> bool:
+    ok = True
+    seen: set[str] = set()
+    for j, name in enumerate(header):
+        col = _cell_column(row, j)
+        span = Span(path, line, col, line, col + max(len(row[j]), 1))
+        if not name:
+            diags.append(SIM606(f"column {j + 1} of the header has no name", span))
+            ok = False
+        elif name in seen:
+            diags.append(SIM606(f"column '{name}' appears twice in the header", span))
+            ok = False
+        seen.add(name)
+    return ok
+
+
+def read_trace(path: str | os.PathLike[str], *, dt: float | None = None) -> tuple[Trace | None, list[Diagnostic]]:
+    """Read a trace CSV. ``dt`` [s] overrides the period read from the time column.
+
+    Returns the trace (``None`` if it cannot be used) and the diagnostics found.
+    """
+    path = os.fspath(path)
+    diags: list[Diagnostic] = []
+    whole = Span.whole_file(path)
+    if dt is not None and not (math.isfinite(dt) and dt > 0):
+        diags.append(SIM601(f"the sampling period must be a positive number of seconds, got {dt}", whole))
+        return None, diags
+    read = _read_rows(path, diags)
+    if read is None:
+        return None, diags
+    header, cols, lines = read
+    tcol = next((c for c in TIME_COLUMNS if c in header), None)
+    n = len(lines)
+    columns = {name: np.frombuffer(col, dtype=np.float64) if len(col) else np.empty(0) for name, col in zip(header, cols)}
+    if tcol is None and dt is None:
+        diags.append(
+            SIM601(
+                "the trace has no time column",
+                Span(path, 1, 1, 1, 1 + len(",".join(header))),
+                hint="name the time column 't' or 'time' (seconds), or give the period with --dt",
+            )
+        )
+        return None, diags
+    if n == 0:
+        diags.append(SIM604("the trace has a header but no samples", whole, hint="record at least one row"))
+        return None, diags
+    t = columns.pop(tcol) if tcol is not None else np.arange(n) * dt
+    if tcol is not None:
+        diffs = np.diff(t)
+        bad = np.flatnonzero(diffs <= 0)
+        if bad.size:
+            k = int(bad[0]) + 1
+            diags.append(
+                SIM601(
+                    f"time goes from {t[k - 1]:g} s to {t[k]:g} s: the time column must increase strictly",
+                    Span(path, lines[k], 1),
+                    hint="sort the rows by time and remove repeated samples",
+                )
+            )
+            return None, diags
+        period = float(np.sort(diffs)[(n - 2) // 2]) if n > 1 else None  # lower median
+        if period is not None:
+            off = np.flatnonzero(np.abs(diffs - (dt or period)) > SPACING_TOLERANCE * (dt or period))
+            if off.size:
+                k = int(off[0]) + 1
+                where = Span(path, lines[k], 1)
+                if dt is None:
+                    diags.append(
+                        SIM601(
+                            f"samples are not uniform: {diffs[k - 1]:g} s between this row and the previous one, "
+                            f"but {period:g} s elsewhere",
+                            where,
+                            hint="resample the trace to a fixed period (or give --dt to take rows as samples)",
+                        )
+                    )
+                    return None, diags
+                diags.append(
+                    SIM601(
+                        f"the time column's spacing ({diffs[k - 1]:g} s here) differs from --dt {dt:g} s; "
+                        f"rows are taken as samples every {dt:g} s",
+                        where,
+                        severity=Severity.WARNING,
+                    )
+                )
+        if dt is None:
+            if period is None:
+                diags.append(
+                    SIM608(
+                        f"one sample: the period cannot be read from the time column; {ONE_ROW_DT:g} s is assumed",
+                        Span(path, lines[0], 1),
+                        hint="give --dt to choose it",
+                    )
+                )
+                dt = ONE_ROW_DT
+            else:
+                dt = float(f"{period:.12g}")  # 0.1, not 0.09999999999999998 from the decimal times
+    assert dt is not None
+    return Trace(path, t, columns, float(dt)), diags
+
+
+# --------------------------------------------------------------------------------- monitoring
+
+
+def _const_value(term: ast.Node, known: Mapping[str, float]) -> float | None:
+    if isinstance(term, ast.Num):
+        return float(term.value)
+    if isinstance(term, ast.Var):
+        return known.get(term.name)
+    if isinstance(term, ast.Neg):
+        v = _const_value(term.operand, known)
+        return None if v is None else -v
+    if isinstance(term, ast.Abs):
+        v = _const_value(term.operand, known)
+        return None if v is None else abs(v)
+    if isinstance(term, ast.Arith):
+        a, b = _const_value(term.left, known), _const_value(term.right, known)
+        if a is None or b is None:
+            return None
+        if term.op == "/":
+            return a / b if b != 0 else None
+        return a + b if term.op == "+" else a - b if term.op == "-" else a * b
+    return None
+
+
+def consts_of(rule_file: ast.RuleFile) -> dict[str, float]:
+    """The values of the file's ``const float NAME = value`` declarations (in order)."""
+    out: dict[str, float] = {}
+    for d in rule_file.declarations:
+        if d.kind == "const" and d.value is not None:
+            v = _const_value(d.value, out)
+            if v is not None:
+                out[d.name] = v
+    return out
+
+
+def _reads(formula: ast.Node, skip: set[str]) -> list[ast.Var | ast.Call]:
+    """The signal reads of a formula (Vars not in ``skip``, built-in calls), in source order."""
+    return [
+        n for n in formula.walk() if (isinstance(n, ast.Var) and n.name not in skip) or isinstance(n, ast.Call)
+    ]
+
+
+def _finite(x: float) -> Any:
+    if math.isnan(x):
+        return None
+    if math.isinf(x):
+        return "inf" if x > 0 else "-inf"
+    return float(x)
+
+
+def monitor_trace(
+    rules: Sequence[ast.Rule] | ast.RuleFile,
+    consts: Mapping[str, float],
+    trace: Trace,
+    *,
+    series: bool = False,
+    builtins: Mapping[str, Builtin] | None = None,
+) -> tuple[MonitorReport, list[Diagnostic]]:
+    """Evaluate every rule over the trace (offline, RTAMT semantics). A rule that reads a column
+    the trace lacks (or depends on such a rule) is left out of the report with a diagnostic."""
+    if isinstance(rules, ast.RuleFile):
+        consts = {**consts_of(rules), **consts}
+        rules = rules.rules
+    builtins = DEFAULT_BUILTINS if builtins is None else builtins
+    diags: list[Diagnostic] = []
+    report_rules: list[RuleVerdict] = []
+    done: dict[str, np.ndarray] = {}
+    failed: set[str] = set()
+    known = list(trace.columns)
+    whole = Span.whole_file(trace.path)
+    if trace.samples == 0:
+        diags.append(SIM604("the trace has no samples", whole))
+        return MonitorReport(trace.path, trace.dt, 0, ()), diags
+    for rule in rules:
+        rule_names = {r.name for r in rules}
+        missing = []
+        for node in _reads(rule.formula, set(consts) | rule_names):
+            names = [node.name] if isinstance(node, ast.Var) else list(BUILTIN_SIGNALS.get(node.name, ()))
+            for name in names:
+                if name not in trace.columns and name not in missing:
+                    missing.append(name)
+                    close = difflib.get_close_matches(name, known, n=1, cutoff=0.6)
+                    hint = f"did you mean '{close[0]}'?" if close else f"the trace has columns: {', '.join(known) or '(none)'}"
+                    diags.append(
+                        SIM602(
+                            f"rule '{rule.name}' reads signal '{name}', but the trace {os.path.basename(trace.path)} "
+                            f"has no column '{name}'",
+                            node.span or rule.name_span or rule.span or whole,
+                            hint=hint,
+                        )
+                    )
+        deps = [n.name for n in rule.formula.walk() if isinstance(n, ast.Var) and n.name in failed]
+        if missing or deps:
+            failed.add(rule.name)
+            continue
+        try:
+            with np.errstate(all="ignore"):
+                rob = robustness(rule.formula, trace.columns, trace.dt, consts=consts, rules=done, builtins=builtins)
+        except MonitorError as exc:
+            diags.append(SIM607(f"rule '{rule.name}': {exc.message}", rule.name_span or rule.span or whole))
+            failed.add(rule.name)
+            continue
+        done[rule.name] = rob
+        neg = np.flatnonzero(rob < 0)
+        report_rules.append(
+            RuleVerdict(
+                name=rule.name,
+                robustness=float(rob[0]),
+                satisfied=bool(rob[0] >= 0),
+                first_violation_t=float(trace.t[neg[0]]) if neg.size else None,
+                series=rob if series else None,
+            )
+        )
+    return MonitorReport(trace.path, trace.dt, trace.samples, tuple(report_rules)), diags
+
+
+def to_json(report: MonitorReport) -> dict[str, Any]:
+    """The report as JSON-safe data (see the module docstring for inf/NaN)."""
+    rules = []
+    for r in report.rules:
+        item: dict[str, Any] = {
+            "name": r.name,
+            "robustness": _finite(r.robustness),
+            "satisfied": r.satisfied,
+            "first_violation_t": r.first_violation_t,
+        }
+        if r.series is not None:
+            item["series"] = [_finite(float(v)) for v in r.series]
+        rules.append(item)
+    return {"rules": rules}
