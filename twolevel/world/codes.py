@@ -34,3 +34,6 @@ YML421 = Code("YML421", "population-crowded", W, "A population could not place a
 YML422 = Code("YML422", "not-a-mapping", E, "The document is not a mapping of keys to values.")
 
 __all__ = [name for name in dir() if name.startswith("YML")]
+
+#: Codes meaning the file could not be read at all: ``twolevel check`` exits 2 on them.
+UNREADABLE: frozenset[str] = frozenset({"YML401"})
