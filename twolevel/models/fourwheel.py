@@ -41,7 +41,8 @@ Integration: fixed internal step h = dt / ceil(dt / h_int) (5 ms by default), fi
   mode is faster than 1/h, which only happens below ≈ 1 m/s, inside the kinematic blend.
 - positions and heading: trapezoidal rule; load-transfer lag: implicit Euler.
 Halving h from 5 ms changes the end of an aggressive 2 s manoeuvre (step steer 0.3 rad at
-15 m/s with full throttle, then full braking) by a few centimetres (tests/models).
+15 m/s with full throttle, then full braking) by 6 cm, 0.01 rad, 0.09 m/s; against the
+converged solution (h → 0) the 5 ms end state is 10 cm, 0.018 rad, 0.17 m/s off (tests/models).
 
 The equations are written once on *columns* (one array per state component) with an ``xp``
 namespace, so the same code runs vectorised in numpy (:data:`NP`) and symbolically in casadi
