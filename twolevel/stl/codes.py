@@ -58,3 +58,7 @@ ALL: tuple[Code, ...] = (
     STL211, STL212, STL213, STL214, STL215, STL216, STL217, STL218, STL219,
     STL301, STL302, STL303, STL304, STL305,
 )
+
+UNREADABLE: frozenset[str] = frozenset({STL100.id})
+"""Codes meaning the file could not be read at all: the CLI exits 2 on them (usage error).
+Binary, non-UTF-8, oversized or too deeply nested files were read and are findings (exit 1)."""

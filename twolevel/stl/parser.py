@@ -305,7 +305,7 @@ def _syntax_error(
         if wants_atom:
             core = f"expected {what}{after}"
         else:
-            core = "expected " + " or ".join(sorted(_WORDS.get(e, e.lower()) for e in expected if e != "$END"))
+            core = "expected " + " or ".join(sorted(_WORDS.get(e, e.lower()) for e in expected if e != "$END")) + after
         if rule is not None:
             where = "" if at_eof else " before the next statement"
             return codes.STL101(f"{lead}the formula of rule '{rule}' is incomplete{where}", span, hint=core)
