@@ -397,6 +397,30 @@ def _check_scenario(spec: ScenarioFile, doc: Document, m: MapFile) -> list[Diagn
                 out.append(YML416(f"no lane '{lane}' in the map", doc.locate(("populations", i, "lanes", k), value=True),
                                   hint=_suggest(lane, lengths)))
     out += _check_ids(ids[1:], doc, "participant")
+    out += _check_vehicle(spec, doc)
+    return out
+
+
+def _check_vehicle(spec: ScenarioFile, doc: Document) -> list[Diagnostic]:
+    """Ego vehicle-parameter overrides name real parameters of the bicycle (``l_f``) or the
+    detailed model, with physically valid values (twolevel/models/params.py decides)."""
+    from twolevel.models.params import BicycleParams, InvalidParameterError, UnknownParameterError, VehicleParams
+
+    out: list[Diagnostic] = []
+    bicycle_names = {f for f in BicycleParams.__dataclass_fields__}
+    vehicle_names = {f for f in VehicleParams.__dataclass_fields__}
+    for name, value in spec.ego.vehicle.items():
+        loc = ("ego", "vehicle", name)
+        target = BicycleParams() if name in bicycle_names else VehicleParams()
+        try:
+            target.with_overrides({name: value})
+        except UnknownParameterError:
+            known = sorted(bicycle_names | vehicle_names)
+            hint = _suggest(name, known)
+            out.append(YML411(f"unknown vehicle parameter '{name}'", doc.locate(loc),
+                              hint=hint or f"known parameters: {', '.join(known)}"))
+        except InvalidParameterError as exc:
+            out.append(YML414(f"vehicle parameter '{name}' = {value!r}: {exc.reason}", doc.locate(loc, value=True)))
     return out
 
 
