@@ -133,9 +133,9 @@ def render_gif(
             moving.append(ax.add_collection(LineCollection(segs, colors=LANE, linewidths=1.0, linestyles="--"), autolim=False))
         except (TypeError, ValueError):
             problems.append("run.json's map_lines is malformed: lane lines not drawn")
-        t_col = v_col = dec = None
+        t_col = v_col = dec = gap = None
         if trace is not None:
-            t_col, v_col, dec = trace.get("t"), trace.get("v"), trace.get("decision")
+            t_col, v_col, dec, gap = trace.get("t"), trace.get("v"), trace.get("decision"), trace.get("min_gap")
             x, y = trace.get("x"), trace.get("y")
             if isinstance(x, np.ndarray) and isinstance(y, np.ndarray) and x.size == y.size:
                 moving += ax.plot(x, y, color=PATH, linewidth=1.0, scalex=False, scaley=False)
@@ -164,7 +164,11 @@ def render_gif(
             lights.set_offsets(np.array([[_num(lg.get("x")), _num(lg.get("y"))] for lg in lt]).reshape(-1, 2))
             lights.set_facecolors([LIGHT.get(str(lg.get("state", "none")), LIGHT["none"]) for lg in lt] or ["none"])
             lights.set_offset_transform(shift)
-            title.set_text(_title(float(f["t"]), e, t_col, v_col, dec))
+            k = _row(float(f["t"]), t_col)
+            hit = k is not None and isinstance(gap, np.ndarray) and gap.size == t_col.size and bool(gap[k] < 0)
+            ego.set_edgecolor(LIGHT["red"] if hit else "#003399")
+            ego.set_linewidth(2.0 if hit else 1.0)
+            title.set_text(_title(float(f["t"]), e, k, v_col, dec) + ("   BOXES OVERLAP" if hit else ""))
             canvas.restore_region(background)
             for a in moving:
                 a.set_transform(shift)
@@ -188,12 +192,20 @@ def _num(value: Any) -> float:
         return math.nan
 
 
-def _title(t: float, ego: np.ndarray, t_col: Any, v_col: Any, dec: Any) -> str:
+def _row(t: float, t_col: Any) -> int | None:
+    """The trace row recorded at time ``t`` [s] (the first at or after it)."""
+    if not isinstance(t_col, np.ndarray) or not t_col.size:
+        return None
+    return int(np.clip(np.searchsorted(t_col, t - 1e-9), 0, t_col.size - 1))
+
+
+def _title(t: float, ego: np.ndarray, k: int | None, v_col: Any, dec: Any) -> str:
     text = f"t = {t:.2f} s   ego at ({ego[0]:.1f}, {ego[1]:.1f}) m"
-    if isinstance(t_col, np.ndarray) and t_col.size:
-        k = int(np.clip(np.searchsorted(t_col, t - 1e-9), 0, t_col.size - 1))
-        if isinstance(v_col, np.ndarray) and v_col.size == t_col.size and math.isfinite(v_col[k]):
-            text += f"\nv = {v_col[k]:.2f} m/s"
-        if isinstance(dec, Sequence) and len(dec) == t_col.size:
-            text += f"{'   ' if chr(10) in text else chr(10)}decision: {dec[k]}"
-    return text
+    if k is None:
+        return text
+    parts = []
+    if isinstance(v_col, np.ndarray) and k < v_col.size and math.isfinite(v_col[k]):
+        parts.append(f"v = {v_col[k]:.2f} m/s")
+    if isinstance(dec, Sequence) and k < len(dec):
+        parts.append(f"decision: {dec[k]}")
+    return text + ("\n" + "   ".join(parts) if parts else "")

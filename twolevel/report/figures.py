@@ -223,9 +223,10 @@ def _distance(fig: Any, series: Sequence[Series]) -> bool:
             ax_d.plot(s.t, _finite(d), color=_colour(i), linewidth=1.2, label=name or "nearest vehicle, centre to centre")
         if g is not None:
             ax_g.plot(s.t, _finite(g), color=_colour(i), linewidth=1.2, label=name or "nearest vehicle, box to box")
-            for ep in s.metrics.collisions.episodes:
+            for k, ep in enumerate(s.metrics.collisions.episodes):
                 ax_g.axvspan(ep.t_start, ep.t_end + s.metrics.dt_s if math.isfinite(s.metrics.dt_s) else ep.t_end,
-                             color="#d62728", alpha=0.25, label=_run_suffix(series, s, "boxes overlap (collision)"))
+                             color="#d62728" if len(series) == 1 else _colour(i), alpha=0.25,
+                             label=_run_suffix(series, s, "boxes overlap (collision)") if k == 0 else None)
     ax_d.axhline(COLLISION_LINE_M, color="#d62728", label=f"{COLLISION_LINE_M} m: collision (paper's measure)", **LIMIT)
     ax_g.axhline(0.0, color="#d62728", label="0 m: boxes touch", **LIMIT)
     ax_d.set(ylabel="min. distance [m]", title="Distance to the nearest other vehicle")

@@ -125,7 +125,7 @@ def _animation_section(gif: bytes | None, note: str | None) -> str:
     if gif:
         data = base64.b64encode(gif).decode("ascii")
         parts.append(f'<figure><img alt="top-down animation of the run" src="data:image/gif;base64,{data}">'
-                     "<figcaption>Top view: ego (blue) with its plan (orange), nearby vehicles (grey), lights (dots).</figcaption></figure>")
+                     "<figcaption>Top view centred on the ego (blue; outlined red while the boxes overlap) with its plan (orange), nearby vehicles (grey), the travelled path (light blue), lane centre lines (dashed) and the lights (coloured dots).</figcaption></figure>")
     if note:
         parts.append(f'<p class="warn">{_e(note)}</p>')
     return "".join(parts)
