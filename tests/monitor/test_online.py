@@ -33,7 +33,7 @@ def _prefix(sig: dict[str, np.ndarray], m: int) -> dict[str, np.ndarray]:
     return {k: v[:m] for k, v in sig.items()}
 
 
-@settings(max_examples=120, deadline=None)
+@settings(max_examples=300, deadline=None)
 @given(formulas(scale=DT, bounded=True), traces(0, 14))
 def test_online_equals_offline_on_every_prefix(f: A.Node, sig: dict[str, np.ndarray]) -> None:
     mon = OnlineMonitor(f, DT)

@@ -173,7 +173,14 @@ def _read_rows(path: str, diags: list[Diagnostic]) -> tuple[list[str], list[arra
                     diags.append(SIM603(f"stopped after {errors} bad rows", Span(path, line, 1)))
                     return None
     except UnicodeDecodeError:
-        diags.append(SIM605(f"the trace file is not valid UTF-8 (after line {line})", Span(path, line + 1, 1)))
+        bad = _first_non_utf8_line(path)
+        diags.append(
+            SIM605(
+                f"line {bad} of the trace file is not valid UTF-8",
+                Span(path, bad, 1),
+                hint="save the file as UTF-8",
+            )
+        )
         return None
     except (csv.Error, OSError) as exc:
         diags.append(SIM605(f"cannot read the trace file: {exc}", Span(path, max(line, 1), 1)))
@@ -184,6 +191,17 @@ def _read_rows(path: str, diags: list[Diagnostic]) -> tuple[list[str], list[arra
     if errors:
         return None
     return header, cols, list(lines)
+
+
+def _first_non_utf8_line(path: str) -> int:
+    """The 1-based number of the first line that does not decode as UTF-8 (streamed)."""
+    with open(path, "rb") as fh:
+        for number, raw in enumerate(fh, start=1):
+            try:
+                raw.decode("utf-8")
+            except UnicodeDecodeError:
+                return number
+    return 1
 
 
 def _check_header(path: str, line: int, row: list[str], header: list[str], diags: list[Diagnostic]) -> bool:
@@ -281,7 +299,8 @@ def read_trace(path: str | os.PathLike[str], *, dt: float | None = None) -> tupl
                 )
                 dt = ONE_ROW_DT
             else:
-                dt = float(f"{period:.12g}")  # 0.1, not 0.09999999999999998 from the decimal times
+                span_dt = float(t[-1] - t[0]) / (n - 1)  # uniform: the mean is the most accurate
+                dt = float(f"{span_dt:.12g}")  # 0.1, not 0.09999999999999998 from decimal times
     assert dt is not None
     return Trace(path, t, columns, float(dt)), diags
 

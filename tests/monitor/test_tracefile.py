@@ -1,0 +1,213 @@
+"""Trace CSV files: golden diagnostics for every kind of bad file, defined results for the
+edge cases, monitoring rules over a trace, and the JSON report."""
+
+from __future__ import annotations
+
+import json
+import math
+import tracemalloc
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from twolevel.diagnostics import Severity, Span
+from twolevel.monitor.tracefile import consts_of, monitor_trace, read_trace, to_json
+from twolevel.stl import ast as A
+
+EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "monitor" / "drive.csv"
+
+
+def _write(tmp_path: Path, text: str | bytes, name: str = "trace.csv") -> str:
+    p = tmp_path / name
+    if isinstance(text, bytes):
+        p.write_bytes(text)
+    else:
+        p.write_text(text, encoding="utf-8")
+    return str(p)
+
+
+def _codes(diags: list) -> list[tuple[str, int, int]]:
+    return [(d.code, d.span.line, d.span.column) for d in diags]
+
+
+# ----------------------------------------------------------------------------- golden bad files
+
+
+@pytest.mark.parametrize(
+    ("name", "content", "expected", "words"),
+    [
+        ("empty", "", [("SIM604", 1, 1)], "empty"),
+        ("blank", "\n\n  \n", [("SIM604", 1, 1)], "empty"),
+        ("header_only", "t,v\n", [("SIM604", 1, 1)], "no samples"),
+        ("binary", b"t,v\n\x00\x01\x02\n", [("SIM605", 1, 1)], "binary"),
+        ("latin1", "t,v\n0,1\n".encode() + "0.1,caf\xe9\n".encode("latin-1"), [("SIM605", 3, 1)], "UTF-8"),
+        ("no_time", "x,v\n0,1\n1,2\n", [("SIM601", 1, 1)], "no time column"),
+        ("backwards", "t,v\n0,1\n0.1,2\n0.05,3\n", [("SIM601", 4, 1)], "increase strictly"),
+        ("repeated", "time,v\n0,1\n0.1,2\n0.1,3\n", [("SIM601", 4, 1)], "increase strictly"),
+        ("non_uniform", "t,v\n0,1\n0.1,2\n0.2,2\n0.4,3\n0.5,3\n", [("SIM601", 5, 1)], "not uniform"),
+        ("text_cell", "t,v,w\n0,1,2\n0.1,fast,2\n", [("SIM603", 3, 5)], "'fast' is not a number"),
+        ("nan_cell", "t,v,w\n0,1,2\n0.1,2,NaN\n", [("SIM603", 3, 7)], "column 'w' is NaN"),
+        ("inf_cell", "t,v\n0,inf\n", [("SIM603", 2, 3)], "is inf"),
+        ("empty_cell", "t,v,w\n0,,2\n", [("SIM603", 2, 3)], "is empty"),
+        ("ragged", "t,v\n0,1\n0.1,2,3\n", [("SIM603", 3, 1)], "3 cells"),
+        ("dup_column", "t,v,v\n0,1,2\n", [("SIM606", 1, 5)], "appears twice"),
+        ("unnamed_column", "t,,v\n0,1,2\n", [("SIM606", 1, 3)], "no name"),
+    ],
+)
+def test_bad_trace_files(tmp_path: Path, name: str, content: str | bytes, expected: list, words: str) -> None:
+    path = _write(tmp_path, content, f"{name}.csv")
+    trace, diags = read_trace(path)
+    assert trace is None
+    assert _codes(diags) == expected
+    assert words in diags[0].message
+    assert all(d.severity is Severity.ERROR and d.span.file == path for d in diags)
+
+
+def test_missing_file_and_directory(tmp_path: Path) -> None:
+    trace, diags = read_trace(str(tmp_path / "nope.csv"))
+    assert trace is None and _codes(diags) == [("SIM605", 1, 1)] and "does not exist" in diags[0].message
+    trace, diags = read_trace(str(tmp_path))
+    assert trace is None and _codes(diags) == [("SIM605", 1, 1)] and "directory" in diags[0].message
+
+
+def test_many_bad_cells_stop_early(tmp_path: Path) -> None:
+    rows = "\n".join(f"{k * 0.1:.1f},x" for k in range(500))
+    trace, diags = read_trace(_write(tmp_path, "t,v\n" + rows + "\n"))
+    assert trace is None
+    assert len(diags) == 21 and "stopped after 20" in diags[-1].message
+
+
+# ----------------------------------------------------------------------------- defined results
+
+
+def test_good_trace_with_bom_crlf_and_spaces(tmp_path: Path) -> None:
+    text = "\ufefftime, v , w\r\n0.0, 1.5, 2\r\n0.1, 2.5, 3\r\n0.2,3.5,4\r\n"
+    trace, diags = read_trace(_write(tmp_path, text))
+    assert diags == [] and trace is not None
+    assert trace.dt == 0.1 and trace.samples == 3
+    assert trace.t.tolist() == [0.0, 0.1, 0.2]
+    assert sorted(trace.columns) == ["v", "w"] and trace.columns["v"].tolist() == [1.5, 2.5, 3.5]
+
+
+def test_one_row_trace_assumes_a_period(tmp_path: Path) -> None:
+    trace, diags = read_trace(_write(tmp_path, "t,v\n3.0,7\n"))
+    assert trace is not None and trace.samples == 1 and trace.dt == 0.1
+    assert _codes(diags) == [("SIM608", 2, 1)] and diags[0].severity is Severity.INFO
+    trace, diags = read_trace(_write(tmp_path, "t,v\n3.0,7\n"), dt=0.5)
+    assert trace is not None and trace.dt == 0.5 and diags == []
+    rule = A.Rule(name="r", formula=A.Temporal("always", A.Interval(0.0, 1.0), A.Compare("<", A.Var("v"), A.Num(10.0))))
+    report, diags = monitor_trace([rule], {}, trace)
+    assert diags == [] and report.rules[0].robustness == 3.0 and report.rules[0].first_violation_t is None
+
+
+def test_dt_override(tmp_path: Path) -> None:
+    # no time column: rows are samples every dt
+    trace, diags = read_trace(_write(tmp_path, "v\n1\n2\n"), dt=0.2)
+    assert diags == [] and trace is not None and trace.t.tolist() == [0.0, 0.2]
+    # a time column that disagrees with --dt: a warning, rows taken as samples every dt
+    trace, diags = read_trace(_write(tmp_path, "t,v\n0,1\n0.1,2\n0.3,3\n"), dt=0.1)
+    assert trace is not None and trace.dt == 0.1
+    assert _codes(diags) == [("SIM601", 4, 1)] and diags[0].severity is Severity.WARNING
+    trace, diags = read_trace(_write(tmp_path, "t,v\n0,1\n"), dt=-1.0)
+    assert trace is None and diags[0].code == "SIM601"
+
+
+def test_large_file_is_streamed(tmp_path: Path) -> None:
+    n = 100_000
+    t = np.arange(n) * 0.01
+    data = np.column_stack([t, np.sin(t), np.cos(t)])
+    path = tmp_path / "big.csv"
+    np.savetxt(path, data, delimiter=",", header="t,a,b", comments="", fmt="%.6f")
+    tracemalloc.start()
+    trace, diags = read_trace(str(path))
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    assert diags == [] and trace is not None and trace.samples == n and trace.dt == 0.01
+    numeric = data.nbytes  # 2.4 MB
+    assert peak < 4 * numeric, peak  # typed arrays + row line numbers, not Python float lists
+
+
+# ----------------------------------------------------------------------------- monitoring
+
+
+def _speed_rules() -> list[A.Rule]:
+    slow = A.Compare("<=", A.Var("v"), A.Arith("+", A.Var("v_max"), A.Var("tol")))
+    return [
+        A.Rule(name="speed_limit", formula=A.Temporal("always", A.Interval(0.0, 1.0), slow)),
+        A.Rule(name="never_fast", formula=A.Temporal("always", None, A.Var("speed_limit"))),
+    ]
+
+
+def test_example_drive_violates_the_speed_limit_briefly() -> None:
+    trace, diags = read_trace(str(EXAMPLE))
+    assert diags == [] and trace is not None and trace.samples == 100 and trace.dt == 0.1
+    report, diags = monitor_trace(_speed_rules(), {"tol": 0.5}, trace, series=True)
+    assert diags == []
+    first = report.rules[0]
+    assert first.name == "speed_limit" and first.satisfied and first.robustness == pytest.approx(2.4)
+    assert first.first_violation_t == pytest.approx(3.3)
+    assert first.series is not None and first.series.shape == (100,)
+    assert not np.all(first.series[-10:] < 0)  # the surge is over before the end
+    assert report.rules[1].robustness < 0 and not report.rules[1].satisfied
+    assert report.violated
+
+
+def test_missing_column_names_signal_and_rule_with_a_hint(tmp_path: Path) -> None:
+    trace, _ = read_trace(_write(tmp_path, "t,v,vmax\n0,1,2\n0.1,1,2\n"))
+    assert trace is not None
+    v_max = A.Var("v_max", span=Span("speed.stl", 4, 30, 4, 35))
+    rules = [
+        A.Rule(name="speed_limit", formula=A.Compare("<=", A.Var("v"), v_max)),
+        A.Rule(name="uses_it", formula=A.Not(A.Var("speed_limit"))),
+        A.Rule(name="ok", formula=A.Compare("<=", A.Var("v"), A.Num(5.0))),
+        A.Rule(name="safe", formula=A.Call("collision_free", (A.Num(1.0),))),
+    ]
+    report, diags = monitor_trace(rules, {}, trace)
+    assert [r.name for r in report.rules] == ["ok"]
+    assert _codes(diags) == [("SIM602", 4, 30), ("SIM602", 1, 1)]
+    assert "'speed_limit'" in diags[0].message and "'v_max'" in diags[0].message
+    assert diags[0].hint == "did you mean 'vmax'?"
+    assert "'min_gap'" in diags[1].message and "'safe'" in diags[1].message
+
+
+def test_unknown_builtin_is_a_diagnostic(tmp_path: Path) -> None:
+    trace, _ = read_trace(_write(tmp_path, "t,v\n0,1\n"))
+    assert trace is not None
+    report, diags = monitor_trace([A.Rule(name="r", formula=A.Call("teleport", ()))], {}, trace)
+    assert report.rules == () and diags[0].code == "SIM607" and "teleport" in diags[0].message
+
+
+def test_json_report_is_json_safe(tmp_path: Path) -> None:
+    trace, _ = read_trace(_write(tmp_path, "t,v\n0,1\n0.5,-1\n1.0,2\n"))
+    assert trace is not None
+    rules = [
+        A.Rule(name="pos", formula=A.Compare(">", A.Var("v"), A.Num(0.0))),
+        A.Rule(name="later", formula=A.Temporal("always", A.Interval(1.0, 1.0), A.Var("v"))),
+    ]
+    report, diags = monitor_trace(rules, {}, trace, series=True)
+    doc = to_json(report)
+    assert json.loads(json.dumps(doc, allow_nan=False)) == doc
+    assert doc["rules"][0] == {
+        "name": "pos",
+        "robustness": 1.0,
+        "satisfied": True,
+        "first_violation_t": 0.5,
+        "series": [1.0, -1.0, 2.0],
+    }
+    assert doc["rules"][1]["series"] == [2.0, "inf", "inf"]  # 1 s = 2 samples
+    plain = to_json(monitor_trace(rules, {}, trace)[0])
+    assert "series" not in plain["rules"][0]
+
+
+def test_consts_of_a_rule_file() -> None:
+    rf = A.RuleFile(
+        path="x.stl",
+        declarations=(
+            A.Declaration(kind="const", type="float", name="a", value=A.Num(2.0)),
+            A.Declaration(kind="const", type="float", name="b", value=A.Arith("*", A.Var("a"), A.Neg(A.Num(1.5)))),
+            A.Declaration(kind="input", type="float", name="v"),
+        ),
+    )
+    assert consts_of(rf) == {"a": 2.0, "b": -3.0}
+    assert math.isfinite(consts_of(rf)["b"])
