@@ -126,6 +126,50 @@ def check(
     raise typer.Exit(pipeline.exit_code(result.diagnostics, strict=strict, exit_zero=exit_zero))
 
 
+def _table(title: str, rows: list[tuple[str, str]]):  # noqa: ANN202 - rich is imported lazily
+    from rich.table import Table
+
+    table = Table(title=title, show_header=False, title_justify="left")
+    table.add_column("metric", style="bold")
+    table.add_column("value", justify="right")
+    for label, value in rows:
+        table.add_row(label, value)
+    return table
+
+
+@app.command()
+def report(
+    run_dir: str = typer.Argument(..., help="A run directory written by `twolevel simulate`."),
+    compare: List[str] = typer.Option([], "--compare", "-c", help="Other run directories to overlay and compare (repeatable)."),
+    gif: bool = typer.Option(True, "--gif/--no-gif", help="Animate the run (top-down GIF) from frames.jsonl."),
+    figure_format: List[str] = typer.Option(["png", "svg"], "--figure-format", help="Figure formats (png, svg, pdf; repeatable)."),
+    out: Optional[str] = typer.Option(None, "--out", "-o", help="Write the report here instead of into RUN_DIR."),
+) -> None:
+    """Turn a run directory into metrics, the paper's figures, a GIF and one self-contained
+    report.html (with summary.json and summary.md).
+
+    Exit 0 when the report was written (problems with the run are listed as warnings),
+    2 when nothing in the run could be read or the output cannot be written.
+    """
+    from twolevel.report import ReportError, build_report
+    from twolevel.report.summary import headline
+
+    err = _console(stderr=True)
+    try:
+        res = build_report(run_dir, compare=compare, gif=gif, formats=tuple(figure_format), out_dir=out)
+    except ReportError as exc:
+        err.print(f"error: {exc}", markup=False)
+        raise typer.Exit(EXIT_USAGE)
+    for problem in res.problems:
+        err.print(f"warning: {problem}", markup=False)
+    console = _console()
+    console.print(_table(f"run {run_dir}", headline(res.metrics)))
+    for other in res.compared:
+        console.print(_table(f"run {other.label}", headline(other)))
+    console.print(f"report: {res.html}  ({len(res.files)} files written)", markup=False)
+    raise typer.Exit(EXIT_OK)
+
+
 def main() -> None:
     """Console-script entry point: never let a Python traceback reach the user."""
     try:
