@@ -217,3 +217,17 @@ def test_work_per_sample_does_not_grow_with_the_window(op: str, monkeypatch: pyt
     # whatever the window (an O(w) rescan would be ~w operations per sample)
     assert max(costs) <= 8.0, costs
     assert costs[2] <= costs[0] * 1.5 + 0.5, costs
+
+
+def test_deep_formulas_run_and_too_deep_terms_are_a_monitor_error() -> None:
+    f: A.Node = A.Var("x")
+    for _ in range(5000):
+        f = A.Not(f)
+    mon = OnlineMonitor(f, DT)
+    mon.update({"x": 2.0})
+    assert mon.finish()["formula"].tolist() == [2.0]
+    t: A.Node = A.Var("x")
+    for _ in range(20000):
+        t = A.Neg(t)
+    with pytest.raises(MonitorError, match="nested too deeply"):
+        OnlineMonitor(A.Compare(">", t, A.Num(0.0)), DT)

@@ -121,7 +121,8 @@ class _Compiler:
         raise MonitorError(f"a {type(t).__name__} is not a term", type(t).__name__)
 
     def atom(self, code: str) -> int:
-        return self.add(st.Atom(lambda s: 0.0, code))
+        fn = eval(f"lambda s: {code}", self.namespace)  # noqa: S307 - built from our own AST
+        return self.add(st.Atom(fn, code))
 
     # -- formulas -------------------------------------------------------------------------------
     def formula(self, root: ast.Node) -> int:
@@ -141,11 +142,11 @@ class _Compiler:
             memo[id(node)] = self.build(node, [memo[id(c)] for c in kids])
         return memo[id(root)]
 
-    def steps(self, interval: ast.Interval | None, op: str) -> tuple[int, int | None]:
+    def steps(self, interval: ast.Interval | None) -> tuple[int, int | None]:
         return (0, None) if interval is None else interval.steps(self.dt)
 
     def bounded(self, interval: ast.Interval | None, op: str) -> tuple[int, int]:
-        a, b = self.steps(interval, op)
+        a, b = self.steps(interval)
         if b is None:
             raise MonitorError(
                 f"'{op}' without an upper time bound looks into the unbounded future and cannot run online; "
@@ -203,7 +204,7 @@ class _Compiler:
         if op in ("always", "eventually"):
             a, b = self.bounded(node.interval, op)
             return self.op(st.FutureWindow(a, b, op == "always"), x)
-        a, bb = self.steps(node.interval, op)
+        a, bb = self.steps(node.interval)
         return self.op(st.PastWindow(a, bb, op == "historically"), x)
 
     def until(self, a: int, b: int, left: int, right: int) -> int:
@@ -215,7 +216,7 @@ class _Compiler:
 
     def bin_temporal(self, node: ast.BinTemporal, left: int, right: int) -> int:
         if node.op == "since":
-            a, b = self.steps(node.interval, node.op)
+            a, b = self.steps(node.interval)
             core = self.op(st.Since0(None if b is None else b - a), left, right)
             if a == 0:
                 return core
@@ -394,9 +395,10 @@ class OnlineMonitor:
         nodes = [s.node.interval() for s in slots]
         emitted: list[list[tuple[int, Any]]] = [[] for _ in self._roots]
         top = max((slots[root].lat for _, root in self._roots), default=0)
+        order = sorted(range(len(slots)), key=lambda j: (slots[j].in_lat, j))
         for i in range(self._i, max(self._i, upto + top + 1)):
             vals: dict[int, Any] = {}
-            for j in sorted(range(len(slots)), key=lambda j: (slots[j].in_lat, j)):
+            for j in order:
                 slot = slots[j]
                 if i < slot.in_lat:
                     continue
