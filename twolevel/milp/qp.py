@@ -91,6 +91,10 @@ class FixedModeQP:
         self._pat = _build_pattern(r_all, c_all, (self._n_rows, self.cont.size))
         self._bound_vals = np.concatenate([np.ones(self._vub.size), -np.ones(self._vlb.size)])
         self._row_of_tri = np.concatenate(out_r[:3])  # Clarabel row of each model triplet
+        self._tri_cols = np.repeat(np.arange(n), np.diff(A.indptr))
+        self._src_rows = A.indices[self._src]
+        self._P_src: object = None
+        self._Pf_ci: sp.csr_matrix | None = None
         # guard binary of each model row (big-M rows)
         self._guard = np.full(m, -1, np.int64)
         for d in model.disjunctions:
@@ -123,14 +127,14 @@ class FixedModeQP:
             off_rows |= disable
         # shift by the fixed integer part
         A = model.A
-        cols = np.repeat(np.arange(model.n_cols), np.diff(A.indptr))
+        cols = self._tri_cols
         ti = self._tri_i
         shift = np.bincount(A.indices[ti], weights=A.data[ti] * full[cols[ti]], minlength=model.n_rows)
         # rows without continuous entries: check in numpy
         br = self._bin_rows[~off_rows[self._bin_rows]]
         ok = bool(np.all(shift[br] >= model.row_lo[br] - 1e-9) and np.all(shift[br] <= model.row_hi[br] + 1e-9))
         vals = A.data[self._src] * self._sign
-        vals = np.where(off_rows_of(self, off_rows), 0.0, vals)
+        vals = np.where(off_rows[self._src_rows], 0.0, vals)
         data = self._pat.scatter(np.concatenate([vals, self._bound_vals]))
         b = np.concatenate([
             model.row_hi[self._eq] - shift[self._eq],
@@ -141,14 +145,38 @@ class FixedModeQP:
         ])
         # cost of the continuous part: q_c + P_ci x_i
         q = model.q[self.cont].copy()
-        if model.P is not None:
-            Pf = model.P + sp.triu(model.P, 1).T
-            if self.ints.size:
-                q += Pf[self.cont][:, self.ints] @ x_int
-            self._P_c = sp.triu(Pf[self.cont][:, self.cont]).tocsc()
-        else:
-            self._P_c = sp.csc_matrix((self.cont.size, self.cont.size))
+        if model.P is not self._P_src:  # the Hessian's parts, once per Hessian object
+            self._P_src = model.P
+            if model.P is not None:
+                Pf = (model.P + sp.triu(model.P, 1).T).tocsr()
+                self._Pf_ci = Pf[self.cont][:, self.ints] if self.ints.size else None
+                P_c = sp.triu(Pf[self.cont][:, self.cont]).tocsc()
+                if self._P_c is not None and self._P_c.nnz == P_c.nnz and np.array_equal(
+                        self._P_c.indices, P_c.indices) and np.array_equal(self._P_c.indptr, P_c.indptr):
+                    self._P_c.data[:] = P_c.data  # same pattern: values only
+                else:
+                    self._P_c = P_c
+            else:
+                self._Pf_ci = None
+                self._P_c = sp.csc_matrix((self.cont.size, self.cont.size))
+        if self._Pf_ci is not None and self._Pf_ci.nnz:
+            q += self._Pf_ci @ x_int
         return data, b, q, ok
+
+    def row_duals(self, sol: Solution) -> np.ndarray:
+        """The dual value of every model row (0 for rows Clarabel does not see), from a
+        :meth:`solve` result: equality duals signed, inequality duals ≥ 0, a row with both
+        bounds summed."""
+        z = sol.info.get("z")
+        out = np.zeros(self.model.n_rows)
+        if z is None or np.size(z) == 0:
+            return out
+        z = np.asarray(z)
+        ne, nu = self._eq.size, self._up.size
+        out[self._eq] += z[:ne]
+        out[self._up] += z[ne:ne + nu]
+        out[self._lo] += z[ne + nu:ne + nu + self._lo.size]
+        return out
 
     def solve(self, x_int: np.ndarray | None = None, *, disable: np.ndarray | None = None) -> Solution:
         """Solve with the integer columns at ``x_int`` (in ``model.integrality`` order; rounded).

@@ -1,0 +1,162 @@
+"""What one MPC step knows before it builds a model: the linearisation, the waypoints, the bounds.
+
+:func:`prepare_step` turns (ego state, time, traffic, history, previous plan) into a
+:class:`StepData`: the linearisation point (the previous plan shifted by one step, or a rollout
+of the reference when there is none), the Jacobians of the kinematic bicycle along it
+(:func:`twolevel.models.bicycle.linearize`, vectorised), the desired waypoints ω_k (positions
+and headings from the route, speed from the route's desired-speed profile, which already obeys
+the limits in force), the solve-time constants of :func:`twolevel.world.signals.horizon_constants`
+and the state bounds (reachable boxes). Units: m, rad, m/s, s.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Mapping
+
+import numpy as np
+
+from twolevel.models import bicycle
+from twolevel.models.params import BicycleParams
+from twolevel.world.signals import HorizonConstants, StopMemory, horizon_constants
+from twolevel.world.traffic import TrafficState
+from twolevel.world.world import World
+
+__all__ = ["StepData", "prepare_step", "direction_box", "wrap_to"]
+
+
+@dataclass(frozen=True, eq=False)
+class StepData:
+    """One step's known quantities (k = 0..H; index 0 is now).
+
+    ``xs_bar`` (H+1, 4) / ``us_bar`` (H, 2): linearisation point; ``A`` (H, 4, 4), ``B`` (H, 4, 2),
+    ``c`` (H, 4): x_{k+1} ≈ A_k x_k + B_k u_k + c_k; ``omega`` (H, 4): waypoints for k = 1..H;
+    ``s_ref`` (H+1,) [m] route positions of the waypoints; ``s_bar``/``h_bar``/``p_bar``: route
+    position, tangent heading and route point of the linearisation point's projection (k = 0..H),
+    for s_k ≈ s̄_k + t̄_kᵀ(p_k − p̄_k); ``lo``/``hi`` (H, 4): state bounds for k = 1..H."""
+
+    t: float
+    x0: np.ndarray
+    u_prev: np.ndarray
+    xs_bar: np.ndarray
+    us_bar: np.ndarray
+    A: np.ndarray
+    B: np.ndarray
+    c: np.ndarray
+    omega: np.ndarray
+    s_ref: np.ndarray
+    s_bar: np.ndarray
+    h_bar: np.ndarray
+    p_bar: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    hc: HorizonConstants
+    lane_width: float
+
+
+def wrap_to(angle: np.ndarray | float, ref: float) -> np.ndarray:
+    """``angle`` shifted by a multiple of 2π to lie within π of ``ref`` [rad]."""
+    return ref + np.mod(np.asarray(angle, float) - ref + math.pi, 2 * math.pi) - math.pi
+
+
+def _cos_range(lo: np.ndarray, hi: np.ndarray, phase: float) -> tuple[np.ndarray, np.ndarray]:
+    """Min and max of cos(θ − phase) over θ ∈ [lo, hi] (vectorised)."""
+    a, b = lo - phase, hi - phase
+    ca, cb = np.cos(a), np.cos(b)
+    mn, mx = np.minimum(ca, cb), np.maximum(ca, cb)
+    has_max = np.floor(b / (2 * math.pi)) >= np.ceil(a / (2 * math.pi))
+    has_min = np.floor((b - math.pi) / (2 * math.pi)) >= np.ceil((a - math.pi) / (2 * math.pi))
+    return np.where(has_min, -1.0, mn), np.where(has_max, 1.0, mx)
+
+
+def direction_box(x0: np.ndarray, H: int, dt: float, params: BicycleParams, v_cap: float,
+                  margin: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+    """State bounds (H, 4) for k = 1..H: speed in [0, min(v0 + a_max·k·dt, v_cap)], heading within
+    the yaw the steering limit allows, and X/Y within the sum of per-step displacement boxes
+    (distance ≤ v·dt in any direction of the reachable heading cone), widened by ``margin`` [m]."""
+    X, Y, psi, v = (float(a) for a in x0[:4])
+    k = np.arange(1, H + 1)
+    v_hi = np.minimum(v + params.a_max * k * dt, v_cap)
+    step = dt * np.concatenate([[v], v_hi[:-1]]) + 0.5 * params.a_max * dt * dt
+    step = np.maximum(step, 0.0)
+    yaw = np.cumsum(step * math.tan(params.delta_max) / params.l_f)
+    yaw = np.minimum(yaw, math.pi)
+    yaw_prev = np.concatenate([[0.0], yaw[:-1]])
+    # step j moves by at most step_j in a direction within psi ± yaw_j (the heading after it)
+    cmin, cmax = _cos_range(psi - yaw, psi + yaw, 0.0)
+    smin, smax = _cos_range(psi - yaw, psi + yaw, math.pi / 2)
+    del yaw_prev
+    dx_lo = np.cumsum(step * np.minimum(cmin, 0.0)) - margin
+    dx_hi = np.cumsum(step * np.maximum(cmax, 0.0)) + margin
+    dy_lo = np.cumsum(step * np.minimum(smin, 0.0)) - margin
+    dy_hi = np.cumsum(step * np.maximum(smax, 0.0)) + margin
+    lo = np.stack([X + dx_lo, Y + dy_lo, psi - yaw - 0.05, np.zeros(H)], axis=1)
+    hi = np.stack([X + dx_hi, Y + dy_hi, psi + yaw + 0.05, v_hi + 0.1], axis=1)
+    return lo, hi
+
+
+def _reference_controls(route_kappa: np.ndarray, v_ref: np.ndarray, dt: float, params: BicycleParams
+                        ) -> np.ndarray:
+    delta = np.clip(np.arctan(params.l_f * route_kappa), -params.delta_max, params.delta_max)
+    acc = np.clip(np.diff(v_ref) / dt, params.a_min, params.a_max)
+    return np.stack([delta, acc], axis=1)
+
+
+def prepare_step(
+    world: World, x0: np.ndarray, t: float, traffic: TrafficState, *, H: int, dt: float,
+    params: BicycleParams, prev: tuple[np.ndarray, np.ndarray] | None = None,
+    u_prev: np.ndarray | None = None, memory: StopMemory | None = None, s_hint: float | None = None,
+) -> StepData:
+    """Everything known at time ``t`` [s] for ego state ``x0`` = (X, Y, ψ, v).
+
+    ``prev`` = (states (H+1, 4), controls (H, 2)) of the previous plan, made one step ago; it is
+    shifted by one step to give the linearisation point. ``u_prev`` [δ, a] is the control applied
+    during the last step (for the ‖u_0 − u_{−1}‖² term; default the previous plan's first)."""
+    route = world.route
+    x0 = np.asarray(x0, dtype=float)[:4].copy()
+    if s_hint is not None and math.isfinite(s_hint):
+        s_arr, _ = route.project_near(x0[None, :2], np.array([s_hint]), 15.0)
+    else:
+        s_arr, _ = route.local_coordinates(x0[None, :2])
+    s0 = float(s_arr[0])
+    s_ref, v_ref = route.reference(s0, max(float(x0[3]), 0.0), H, dt)
+    v_ref = np.minimum(v_ref, route.limit_at(s_ref))
+    pts = route.position(s_ref)
+    head = wrap_to(route.heading_at(s_ref), float(x0[2]))
+    head = x0[2] + np.concatenate([[0.0], np.cumsum(wrap_to(np.diff(head), 0.0))])
+    omega = np.column_stack([pts[1:], head[1:], v_ref[1:]])
+    if prev is not None:
+        ps, pu = prev
+        us_bar = np.vstack([pu[1:], pu[-1:]])
+        xs_bar = np.vstack([x0[None], ps[2:], bicycle.step(ps[-1], pu[-1], dt, params)[None]])
+        xs_bar[:, 2] = wrap_to(xs_bar[:, 2], float(x0[2]))
+        if u_prev is None:
+            u_prev = pu[0]
+    else:
+        us_bar = _reference_controls(route.curvature_at(s_ref[:-1]), v_ref, dt, params)
+        xs_bar = bicycle.rollout(x0, us_bar, dt, params)
+    if u_prev is None:
+        u_prev = np.zeros(2)
+    A, B, c = bicycle.linearize(xs_bar[:-1], us_bar, dt, params)
+    s_bar, _ = route.project_near(xs_bar[:, :2], np.full(H + 1, s0) + np.arange(H + 1) * dt * max(x0[3], 1.0),
+                                  H * dt * (max(x0[3], 1.0) + params.a_max * H * dt) + 10.0)
+    h_bar = route.heading_at(s_bar)
+    p_bar = route.position(s_bar)
+    v_cap = max(float(route.limit_v.max()) * 1.5, float(x0[3]) + 1.0, params.v_max)
+    lo, hi = direction_box(x0, H, dt, params, min(v_cap, params.v_max) if x0[3] <= params.v_max else v_cap)
+    hc = horizon_constants(world, traffic, t, x0, H=H, dt=dt, s_pred=s_ref, memory=memory)
+    width = float(route.width_at(s0))
+    return StepData(t, x0, np.asarray(u_prev, float), xs_bar, us_bar, A, B, c, omega, s_ref, s_bar, h_bar, p_bar,
+                    lo, hi, hc, width)
+
+
+def history_length(history: Mapping[str, np.ndarray] | None, names: set[str], depth: int) -> int:
+    """How many past samples every signal in ``names`` has (at most ``depth``)."""
+    if depth <= 0 or not history:
+        return 0
+    n = depth
+    for name in names:
+        h = history.get(name)
+        n = min(n, 0 if h is None else len(h))
+    return max(n, 0)

@@ -1,0 +1,214 @@
+"""One MPC step as a :class:`~twolevel.milp.model.MilpModel`: dynamics, the paper's cost, rules.
+
+Columns: ``x`` — the states X, Y, ψ, v for k = 1..H (row-major, 4 per step); ``u`` — the inputs
+δ, a for k = 0..H−1; then the encoder's variables (binaries of disjunctions, auxiliaries).
+Rows: ``dyn`` — x_{k+1} − A_k x_k − B_k u_k = c_k (A_0 x_0 moved to the right-hand side), then the
+rules' rows (``stl``, and ``cf*`` for the vectorised collision_free blocks).
+
+Cost (paper): Σ_k w_u‖u_k‖² + w_du‖u_k − u_{k−1}‖² + Σ_i w_i (ζ_{k,i} − ω_{k,i})², as residuals.
+
+Signals of the trace (past samples from ``history``, then now, then k = 1..H): constants for what
+is known at solve time, :class:`~twolevel.milp.encode.AffineSignal` for v, X, Y, ψ, δ, a, the
+route progress s_k ≈ s̄_k + t̄_kᵀ(p_k − p̄_k), the lateral offset e_k ≈ n̄_kᵀ(p_k − p̄_k),
+d_stop,k = s_stop − s_k, d_light,k = s_light − s_k and d_lead,k = s_lead,k − s_k − offset.
+
+Every model of the same *shape* (same triplet structure, same finiteness of bounds, same
+disjunctions) shares one CSC pattern (:class:`~twolevel.milp.model.PatternCache`), so the
+backend can be reused and updated in place (:class:`ShapeKey`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Mapping, Sequence
+
+import numpy as np
+import scipy.sparse as sp
+
+from twolevel.diagnostics import Diagnostic
+from twolevel.milp.builder import ModelBuilder
+from twolevel.milp.collision import collision_free_builtin
+from twolevel.milp.encode import AffineSignal, Encoding, Requirement, encode
+from twolevel.milp.model import MilpModel, PatternCache
+from twolevel.models.params import BicycleParams
+from twolevel.control.horizon import StepData
+
+__all__ = ["Weights", "Layout", "Assembled", "assemble", "trace_signals", "shape_key"]
+
+
+@dataclass(frozen=True)
+class Weights:
+    """Cost weights: ``u`` on ‖u_k‖², ``du`` on ‖u_k − u_{k−1}‖², ``track`` (4,) on (ζ − ω)² per
+    state component X, Y, ψ, v (the paper: all 1)."""
+
+    u: float = 1.0
+    du: float = 1.0
+    track: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
+
+
+@dataclass(frozen=True, eq=False)
+class Layout:
+    """Column indices: ``x`` (H, 4) states k = 1..H, ``u`` (H, 2) inputs k = 0..H−1; ``P`` past
+    samples in the trace (the current step is trace index P)."""
+
+    x: np.ndarray
+    u: np.ndarray
+    P: int
+
+
+@dataclass(eq=False)
+class Assembled:
+    """A built step model and what the encoder said."""
+
+    model: MilpModel
+    layout: Layout
+    encoding: Encoding
+    signals: dict[str, object]
+    diagnostics: list[Diagnostic] = field(default_factory=list)
+
+
+def _affine(cols: np.ndarray, coefs: np.ndarray, offset: np.ndarray, past: np.ndarray, n: int) -> AffineSignal:
+    """Signal with ``len(past)`` constant samples then one row per step: ``coefs[k] @ x[cols[k]] + offset[k]``."""
+    H, m = cols.shape
+    P = past.size
+    indptr = np.concatenate([np.zeros(P + 1, np.int64), m * np.arange(1, H + 1)])
+    C = sp.csr_matrix((coefs.ravel().astype(float), cols.ravel(), indptr), shape=(P + H, n))
+    return AffineSignal(C, np.concatenate([past, offset]))
+
+
+def trace_signals(step: StepData, lay: Layout, n: int, past: Mapping[str, np.ndarray], names: set[str]
+                  ) -> dict[str, object]:
+    """The signals the rules read, over the trace (P past samples, now, k = 1..H)."""
+    H = lay.x.shape[0]
+    P = lay.P
+    hc = step.hc
+    x0 = step.x0
+
+    def hist(name: str, now: float) -> np.ndarray:
+        h = past.get(name)
+        h = np.zeros(0) if h is None or P == 0 else np.asarray(h, float)[-P:]
+        return np.concatenate([h, [now]])
+
+    one = np.ones((H, 1))
+    s_now = float(step.s_bar[0])
+    t_hat = np.stack([np.cos(step.h_bar[1:]), np.sin(step.h_bar[1:])], axis=1)
+    n_hat = np.stack([-np.sin(step.h_bar[1:]), np.cos(step.h_bar[1:])], axis=1)
+    xy = lay.x[:, :2]
+    s_off = step.s_bar[1:] - np.einsum("kj,kj->k", t_hat, step.p_bar[1:])
+    e_off = -np.einsum("kj,kj->k", n_hat, step.p_bar[1:])
+    e_now = float(n_hat[0] @ (x0[:2] - step.p_bar[0])) if H else 0.0
+    out: dict[str, object] = {}
+    for name in names:
+        if name in ("x", "y", "psi", "v"):
+            i = ("x", "y", "psi", "v").index(name)
+            out[name] = _affine(lay.x[:, i:i + 1], one, np.zeros(H), hist(name, float(x0[i])), n)
+        elif name in ("delta", "a"):
+            j = 0 if name == "delta" else 1
+            cols = np.concatenate([lay.u[1:, j], lay.u[-1:, j]])[:, None]
+            out[name] = _affine(cols, one, np.zeros(H), hist(name, float(step.u_prev[j])), n)
+        elif name == "s":
+            out[name] = _affine(xy, t_hat, s_off, hist("s", s_now), n)
+        elif name == "e":
+            out[name] = _affine(xy, n_hat, e_off, hist("e", e_now), n)
+        elif name in ("d_stop", "d_light", "d_lead"):
+            if name == "d_stop":
+                tgt, extra = np.full(H + 1, hc.s_stop), 0.0
+            elif name == "d_light":
+                tgt, extra = np.full(H + 1, hc.s_light), 0.0
+            else:
+                tgt, extra = hc.s_lead, hc.lead_offset
+            if not np.all(np.isfinite(tgt)):
+                out[name] = np.concatenate([hist(name, np.inf)[:-1], np.full(H + 1, np.inf)])
+            else:
+                now = float(tgt[0] - s_now - extra)
+                out[name] = _affine(xy, -t_hat, tgt[1:] - extra - s_off, hist(name, now), n)
+        elif name == "v_max":
+            out[name] = np.concatenate([hist(name, float(hc.v_max[0]))[:-1], hc.v_max])
+        elif name == "light_red":
+            out[name] = np.concatenate([hist(name, float(hc.light_red[0]))[:-1], hc.light_red])
+        elif name == "v_lead":
+            v_lead = float(hc.v[hc.lead]) if hc.lead >= 0 else np.nan
+            if hc.lead < 0:
+                out[name] = _affine(lay.x[:, 3:4], one, np.zeros(H), hist(name, float(x0[3])), n)
+            else:
+                out[name] = np.concatenate([hist(name, v_lead)[:-1], np.full(H + 1, v_lead)])
+        elif name == "n_near":
+            out[name] = np.concatenate([hist(name, float(len(hc.index)))[:-1], np.full(H + 1, float(len(hc.index)))])
+    return out
+
+
+def _dynamics(b: ModelBuilder, step: StepData, lay: Layout) -> None:
+    H = lay.x.shape[0]
+    k = np.arange(H)
+    # x_{k+1}: identity
+    r_id = 4 * k[:, None] + np.arange(4)[None]
+    c_id = lay.x
+    v_id = np.ones((H, 4))
+    # −A_k x_k for k ≥ 1 (dense 4×4, explicit zeros kept)
+    kk = k[1:]
+    r_a = np.broadcast_to((4 * kk[:, None, None] + np.arange(4)[None, :, None]), (H - 1, 4, 4))
+    c_a = np.broadcast_to(lay.x[kk - 1][:, None, :], (H - 1, 4, 4))
+    v_a = -step.A[1:]
+    # −B_k u_k
+    r_b = np.broadcast_to((4 * k[:, None, None] + np.arange(4)[None, :, None]), (H, 4, 2))
+    c_b = np.broadcast_to(lay.u[:, None, :], (H, 4, 2))
+    v_b = -step.B
+    rhs = step.c.copy()
+    rhs[0] += step.A[0] @ step.x0
+    b.add_rows("dyn", 4 * H, np.concatenate([r_id.ravel(), r_a.ravel(), r_b.ravel()]),
+               np.concatenate([c_id.ravel(), c_a.ravel(), c_b.ravel()]),
+               np.concatenate([v_id.ravel(), v_a.ravel(), v_b.ravel()]), rhs.ravel(), rhs.ravel())
+
+
+def _cost(b: ModelBuilder, step: StepData, lay: Layout, w: Weights) -> None:
+    H = lay.x.shape[0]
+    n = b.n_cols
+    nu = 2 * H
+    ucols = lay.u.ravel()
+    r = np.arange(nu)
+    F_u = sp.csr_matrix((np.ones(nu), (r, ucols)), shape=(nu, n))
+    # Δu: u_k − u_{k−1} (u_{−1} known)
+    rd = np.concatenate([r, r[2:]])
+    cd = np.concatenate([ucols, ucols[:-2]])
+    vd = np.concatenate([np.ones(nu), -np.ones(nu - 2)])
+    F_du = sp.csr_matrix((vd, (rd, cd)), shape=(nu, n))
+    g_du = np.zeros(nu)
+    g_du[:2] = step.u_prev
+    nx = 4 * H
+    F_x = sp.csr_matrix((np.ones(nx), (np.arange(nx), lay.x.ravel())), shape=(nx, n))
+    F = sp.vstack([F_u, F_du, F_x]).tocsr()
+    g = np.concatenate([np.zeros(nu), g_du, step.omega.ravel()])
+    wt = np.concatenate([np.full(nu, w.u), np.full(nu, w.du), np.tile(np.asarray(w.track, float), H)])
+    b.add_residuals(F, g, wt)
+
+
+def assemble(
+    step: StepData, requirements: Sequence[Requirement], *, H: int, dt: float, params: BicycleParams,
+    weights: Weights, past: Mapping[str, np.ndarray], P: int, names: set[str],
+    cache: PatternCache | None = None, eps: float = 1e-4,
+) -> Assembled:
+    """Build the step's model (dynamics, cost, every requirement's MILCs)."""
+    b = ModelBuilder()
+    xb = b.add_vars("x", 4 * H, step.lo.ravel(), step.hi.ravel())
+    ub = b.add_vars("u", 2 * H, np.tile([-params.delta_max, params.a_min], H),
+                    np.tile([params.delta_max, params.a_max], H))
+    lay = Layout(xb.idx.reshape(H, 4), ub.idx.reshape(H, 2), P)
+    _dynamics(b, step, lay)
+    sigs = trace_signals(step, lay, b.n_cols, past, names | {"x", "y"})
+    hc = step.hc
+    T = P + 1 + H
+    others = np.full((len(hc.index), T, 2), np.nan)
+    others[:, P:, :] = hc.xy
+    enc = encode(b, requirements, sigs, dt, eps=eps, length=T,
+                 builtins={"collision_free": collision_free_builtin("x", "y", others)})
+    _cost(b, step, lay, weights)
+    model = b.build(cache)
+    return Assembled(model, lay, enc, sigs, list(enc.diagnostics))
+
+
+def shape_key(m: MilpModel) -> tuple:
+    """What must match for a backend built on one model to be reused for another (values aside)."""
+    return (id(m.pattern), m.n_rows, m.n_cols,
+            (m.row_lo == m.row_hi).tobytes(), np.isfinite(m.row_lo).tobytes(), np.isfinite(m.row_hi).tobytes(),
+            np.isfinite(m.lb).tobytes(), np.isfinite(m.ub).tobytes(), m.integrality.tobytes(),
+            tuple((d.cover_row, d.guard, d.binaries.tobytes()) for d in m.disjunctions))
