@@ -94,14 +94,14 @@ def _root(
 
 @app.command()
 def check(
-    paths: List[str] = typer.Argument(..., help="Rule files (.stl), maps and scenarios (.yaml), or folders holding them."),
+    paths: List[str] = typer.Argument(..., metavar="PATH...", help="Rule files (.stl), maps and scenarios (.yaml), or folders holding them."),
     output_format: Optional[OutputFormat] = typer.Option(
         None, "--output-format", "-f", help="full (default on a terminal), concise, json, github (default under GitHub Actions), sarif."
     ),
     strict: bool = typer.Option(False, "--strict", help="Warnings fail the check too."),
     exit_zero: bool = typer.Option(False, "--exit-zero", help="Always exit 0 (report only)."),
-    dt: Optional[float] = typer.Option(None, "--dt", min=1e-9, help="Sample period [s]: intervals must be multiples of it."),
-    horizon: Optional[int] = typer.Option(None, "--horizon", min=1, help="MPC horizon [steps]: longer formulas are reported (needs --dt)."),
+    dt: Optional[float] = typer.Option(None, "--dt", min=1e-9, metavar="SECONDS", help="Sample period [s]: intervals must be multiples of it."),
+    horizon: Optional[int] = typer.Option(None, "--horizon", min=1, metavar="STEPS", help="MPC horizon [steps]: longer formulas are reported (needs --dt)."),
 ) -> None:
     """Check rule files, maps and scenarios without solving anything.
 
@@ -126,6 +126,71 @@ def check(
     raise typer.Exit(pipeline.exit_code(result.diagnostics, strict=strict, exit_zero=exit_zero))
 
 
+def _parse_consts(items: List[str]) -> dict[str, float]:
+    out: dict[str, float] = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        try:
+            if not sep or not name.strip():
+                raise ValueError
+            out[name.strip()] = float(value)
+        except ValueError:
+            raise typer.BadParameter(f"expected NAME=NUMBER, got {item!r}", param_hint="--const") from None
+    return out
+
+
+@app.command()
+def monitor(
+    rules: str = typer.Argument(..., metavar="RULES.stl", help="A rule file (.stl)."),
+    trace: str = typer.Argument(..., metavar="TRACE.csv", help="A recorded trace (.csv) with a time column t or time [s] and one column per signal."),
+    dt: Optional[float] = typer.Option(None, "--dt", min=1e-9, metavar="SECONDS", help="Sample period [s] (default: read from the uniform time column)."),
+    output: MonitorFormat = typer.Option(MonitorFormat.table, "--format", help="table or json."),
+    series: bool = typer.Option(False, "--series", help="Include each rule's whole robustness signal."),
+    const: List[str] = typer.Option([], "--const", metavar="NAME=VALUE", help="Bind or override a constant: NAME=NUMBER (repeatable)."),
+) -> None:
+    """Evaluate every rule of RULES over a recorded drive (offline, RTAMT semantics).
+
+    Exit 0 when every rule holds at every time of the trace, 1 when some rule is violated
+    somewhere (first_violation_t), 2 when the rule file or the trace cannot be used or a rule
+    could not be evaluated (e.g. it reads a column the trace lacks).
+    """
+    import json
+
+    from twolevel import pipeline
+    from twolevel.diagnostics import render
+
+    res = pipeline.monitor(rules, trace, dt=dt, consts=_parse_consts(const), series=series)
+    if res.diagnostics:
+        fmt = "full" if sys.stderr.isatty() else "concise"
+        sys.stderr.write(render(fmt, res.diagnostics, sources=res.sources))
+    if res.report is None:
+        raise typer.Exit(EXIT_USAGE)
+    from twolevel.monitor.tracefile import to_json
+
+    payload = to_json(res.report)
+    if output is MonitorFormat.json:
+        _emit(json.dumps(payload) + "\n")
+    else:
+        rows = payload["rules"]
+        from rich.table import Table
+
+        table = Table(title=f"{rules} over {trace} ({res.report.samples} samples, dt = {res.report.dt:g} s)", title_justify="left")
+        for col, justify in (("rule", "left"), ("robustness at t=0", "right"), ("at t=0", "center"), ("first violation \\[s]", "right")):
+            table.add_column(col, justify=justify)
+        for r in rows:
+            first = r["first_violation_t"]
+            table.add_row(
+                r["name"],
+                f"{r['robustness']:.4g}" if isinstance(r["robustness"], float) else str(r["robustness"]),
+                "holds" if r["satisfied"] else "violated",
+                "-" if first is None else f"{first:g}",
+            )
+        _console().print(table)
+    if any(d.is_error for d in res.diagnostics):  # some rule could not be evaluated
+        raise typer.Exit(EXIT_USAGE)
+    raise typer.Exit(EXIT_FAIL if res.violated else EXIT_OK)
+
+
 def _table(title: str, rows: list[tuple[str, str]]):  # noqa: ANN202 - rich is imported lazily
     from rich.table import Table
 
@@ -139,8 +204,8 @@ def _table(title: str, rows: list[tuple[str, str]]):  # noqa: ANN202 - rich is i
 
 @app.command()
 def report(
-    run_dir: str = typer.Argument(..., help="A run directory written by `twolevel simulate`."),
-    compare: List[str] = typer.Option([], "--compare", "-c", help="Other run directories to overlay and compare (repeatable)."),
+    run_dir: str = typer.Argument(..., metavar="RUN_DIR", help="A run directory written by `twolevel simulate`."),
+    compare: List[str] = typer.Option([], "--compare", "-c", metavar="RUN_DIR", help="Other run directories to overlay and compare (repeatable)."),
     gif: bool = typer.Option(True, "--gif/--no-gif", help="Animate the run (top-down GIF) from frames.jsonl."),
     figure_format: List[str] = typer.Option(["png", "svg"], "--figure-format", help="Figure formats (png, svg, pdf; repeatable)."),
     out: Optional[str] = typer.Option(None, "--out", "-o", help="Write the report here instead of into RUN_DIR."),

@@ -139,3 +139,45 @@ def exit_code(diags: Iterable[Diagnostic], *, strict: bool = False, exit_zero: b
         return 0
     fail = {Severity.ERROR} | ({Severity.WARNING} if strict else set())
     return 1 if any(d.severity in fail for d in diags) else 0
+
+
+@dataclass(frozen=True)
+class MonitorResult:
+    """What ``monitor`` found: the per-rule verdicts (``None`` when it could not run) and every
+    diagnostic about the rule file and the trace."""
+
+    report: object | None  # twolevel.monitor.tracefile.MonitorReport (kept untyped: lazy import)
+    diagnostics: tuple[Diagnostic, ...]
+    sources: Mapping[str, str] = field(default_factory=dict)
+
+    @property
+    def violated(self) -> bool:
+        """True when some rule's robustness falls below zero at some time of the trace."""
+        return bool(self.report is not None and getattr(self.report, "violated"))
+
+
+def monitor(
+    rules_path: str,
+    trace_path: str,
+    *,
+    dt: float | None = None,
+    consts: Mapping[str, float] | None = None,
+    series: bool = False,
+) -> MonitorResult:
+    """Evaluate every named formula of ``rules_path`` over the recorded trace ``trace_path``
+    (offline, RTAMT's discrete-time semantics). ``consts`` bind or override the rule file's
+    constants; ``dt`` [s] overrides the period read from the time column."""
+    from twolevel.monitor.tracefile import monitor_trace, read_trace
+    from twolevel.stl.lint import load_ruleset
+
+    ruleset, diags = load_ruleset(rules_path, consts)
+    sources = {rules_path: _read_text_quietly(rules_path)}
+    if ruleset is None:
+        return MonitorResult(None, tuple(diags), sources)
+    trace, trace_diags = read_trace(trace_path, dt=dt)
+    diags += trace_diags
+    if trace is None or any(d.is_error for d in trace_diags):
+        return MonitorResult(None, tuple(diags), sources)
+    report, run_diags = monitor_trace(ruleset.rules, dict(ruleset.consts), trace, series=series)
+    diags += run_diags
+    return MonitorResult(report, tuple(diags), sources)

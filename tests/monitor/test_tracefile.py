@@ -46,10 +46,7 @@ def _codes(diags: list) -> list[tuple[str, int, int]]:
         ("backwards", "t,v\n0,1\n0.1,2\n0.05,3\n", [("SIM601", 4, 1)], "increase strictly"),
         ("repeated", "time,v\n0,1\n0.1,2\n0.1,3\n", [("SIM601", 4, 1)], "increase strictly"),
         ("non_uniform", "t,v\n0,1\n0.1,2\n0.2,2\n0.4,3\n0.5,3\n", [("SIM601", 5, 1)], "not uniform"),
-        ("text_cell", "t,v,w\n0,1,2\n0.1,fast,2\n", [("SIM603", 3, 5)], "'fast' is not a number"),
-        ("nan_cell", "t,v,w\n0,1,2\n0.1,2,NaN\n", [("SIM603", 3, 7)], "column 'w' is NaN"),
-        ("inf_cell", "t,v\n0,inf\n", [("SIM603", 2, 3)], "is inf"),
-        ("empty_cell", "t,v,w\n0,,2\n", [("SIM603", 2, 3)], "is empty"),
+        ("text_time", "t,v\n0,1\nlater,2\n", [("SIM603", 3, 1)], "'later' is not a number"),
         ("ragged", "t,v\n0,1\n0.1,2,3\n", [("SIM603", 3, 1)], "3 cells"),
         ("dup_column", "t,v,v\n0,1,2\n", [("SIM606", 1, 5)], "appears twice"),
         ("unnamed_column", "t,,v\n0,1,2\n", [("SIM606", 1, 3)], "no name"),
@@ -71,11 +68,39 @@ def test_missing_file_and_directory(tmp_path: Path) -> None:
     assert trace is None and _codes(diags) == [("SIM605", 1, 1)] and "directory" in diags[0].message
 
 
-def test_many_bad_cells_stop_early(tmp_path: Path) -> None:
-    rows = "\n".join(f"{k * 0.1:.1f},x" for k in range(500))
+def test_many_ragged_rows_stop_early(tmp_path: Path) -> None:
+    rows = "\n".join(f"{k * 0.1:.1f},1,2" for k in range(500))
     trace, diags = read_trace(_write(tmp_path, "t,v\n" + rows + "\n"))
     assert trace is None
     assert len(diags) == 21 and "stopped after 20" in diags[-1].message
+
+
+@pytest.mark.parametrize(
+    ("name", "content", "where", "words"),
+    [
+        ("text_cell", "t,v,w\n0,1,2\n0.1,fast,2\n", (3, 5), "'fast' is not a number"),
+        ("nan_cell", "t,w,v\n0,1,2\n0.1,2,NaN\n", (3, 7), "column 'v' is NaN"),
+        ("empty_cell", "t,v,w\n0,,2\n0.1,1,2\n", (2, 3), "is empty"),
+    ],
+)
+def test_bad_cells_matter_only_in_columns_a_rule_reads(tmp_path: Path, name: str, content: str, where: tuple, words: str) -> None:
+    """A simulator trace carries text columns (decision, light_state): they are no error unless
+    a rule reads them; then the first bad cell is reported at its line and column."""
+    trace, diags = read_trace(_write(tmp_path, content, f"{name}.csv"))
+    assert trace is not None and diags == [] and "v" in trace.unusable
+    other = [c for c in trace.columns if c != "v"]
+    reads_v = A.Rule("r", A.Compare(">=", A.Var("v"), A.Num(0.0)))
+    reads_other = A.Rule("q", A.Compare(">=", A.Var(other[0]), A.Num(0.0)))
+    report, diags = monitor_trace([reads_other, reads_v], {}, trace)
+    assert [r.name for r in report.rules] == ["q"]
+    assert [(d.code, d.span.line, d.span.column) for d in diags] == [("SIM603", *where)]
+    assert words in diags[0].message and "rule 'r'" in diags[0].message
+
+
+def test_infinite_cells_are_values(tmp_path: Path) -> None:
+    trace, diags = read_trace(_write(tmp_path, "t,d_stop\n0,inf\n0.1,-inf\n"))
+    assert diags == [] and trace is not None
+    assert trace.columns["d_stop"].tolist() == [math.inf, -math.inf]
 
 
 # ----------------------------------------------------------------------------- defined results

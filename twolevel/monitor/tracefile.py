@@ -22,7 +22,7 @@ import difflib
 import math
 import os
 from array import array
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Mapping, Sequence
 
 import numpy as np
@@ -58,6 +58,9 @@ class Trace:
     t: np.ndarray
     columns: Mapping[str, np.ndarray]
     dt: float
+    #: Columns that hold text or missing cells (a simulator's ``decision``, ``light_state``),
+    #: with the diagnostic to give if a rule reads one of them.
+    unusable: Mapping[str, Diagnostic] = field(default_factory=dict)
 
     @property
     def samples(self) -> int:
@@ -100,8 +103,12 @@ def _cell_column(row: Sequence[str], j: int) -> int:
     return 1 + sum(len(c) + 1 for c in row[:j])
 
 
-def _read_rows(path: str, diags: list[Diagnostic]) -> tuple[list[str], list[array], list[int]] | None:
-    """Stream the CSV: header names, one typed array per column, the file line of every row."""
+def _read_rows(
+    path: str, diags: list[Diagnostic]
+) -> tuple[list[str], list[array], list[int], dict[str, Diagnostic]] | None:
+    """Stream the CSV: header names, one typed array per column, the file line of every row, and
+    for each column holding a cell that is not a number (text, empty, NaN) the diagnostic of its
+    first such cell. ``inf``/``-inf`` are numbers (e.g. ``d_stop`` with no stop line near)."""
     whole = Span.whole_file(path)
     try:
         with open(path, "rb") as fh:
@@ -124,6 +131,7 @@ def _read_rows(path: str, diags: list[Diagnostic]) -> tuple[list[str], list[arra
     header: list[str] | None = None
     cols: list[array] = []
     lines = array("l")
+    unusable: dict[str, Diagnostic] = {}
     errors = 0
     line = 0
     try:
@@ -156,17 +164,14 @@ def _read_rows(path: str, diags: list[Diagnostic]) -> tuple[list[str], list[arra
                             value = math.nan
                             what = "is empty" if not text else f"'{text[:40]}' is not a number"
                         else:
-                            what = f"is {text}" if not math.isfinite(value) else ""
-                        if what:
+                            what = "is NaN" if math.isnan(value) else ""
+                        if what and header[j] not in unusable:
                             col = _cell_column(row, j)
-                            diags.append(
-                                SIM603(
-                                    f"cell in column '{header[j]}' {what}",
-                                    Span(path, line, col, line, col + max(len(cell), 1)),
-                                    hint="every cell must be a finite number (NaN and inf are not allowed)",
-                                )
+                            unusable[header[j]] = SIM603(
+                                f"cell in column '{header[j]}' {what}",
+                                Span(path, line, col, line, col + max(len(cell), 1)),
+                                hint="a signal read by a rule must be a number in every row (inf is allowed, NaN is not)",
                             )
-                            errors += 1
                         cols[j].append(value)
                     lines.append(line)
                 if errors >= MAX_CELL_ERRORS:
@@ -190,7 +195,7 @@ def _read_rows(path: str, diags: list[Diagnostic]) -> tuple[list[str], list[arra
         return None
     if errors:
         return None
-    return header, cols, list(lines)
+    return header, cols, list(lines), unusable
 
 
 def _first_non_utf8_line(path: str) -> int:
@@ -234,8 +239,11 @@ def read_trace(path: str | os.PathLike[str], *, dt: float | None = None) -> tupl
     read = _read_rows(path, diags)
     if read is None:
         return None, diags
-    header, cols, lines = read
+    header, cols, lines, unusable = read
     tcol = next((c for c in TIME_COLUMNS if c in header), None)
+    if tcol is not None and tcol in unusable:
+        diags.append(unusable[tcol])
+        return None, diags
     n = len(lines)
     columns = {name: np.frombuffer(col, dtype=np.float64) if len(col) else np.empty(0) for name, col in zip(header, cols)}
     if tcol is None and dt is None:
@@ -302,7 +310,9 @@ def read_trace(path: str | os.PathLike[str], *, dt: float | None = None) -> tupl
                 span_dt = float(t[-1] - t[0]) / (n - 1)  # uniform: the mean is the most accurate
                 dt = float(f"{span_dt:.12g}")  # 0.1, not 0.09999999999999998 from decimal times
     assert dt is not None
-    return Trace(path, t, columns, float(dt)), diags
+    for name in unusable:
+        columns.pop(name, None)
+    return Trace(path, t, columns, float(dt), unusable), diags
 
 
 # --------------------------------------------------------------------------------- monitoring
@@ -384,7 +394,11 @@ def monitor_trace(
         for node in _reads(rule.formula, set(consts) | rule_names):
             names = [node.name] if isinstance(node, ast.Var) else list(BUILTIN_SIGNALS.get(node.name, ()))
             for name in names:
-                if name not in trace.columns and name not in missing:
+                if name in trace.unusable and name not in missing:
+                    missing.append(name)
+                    bad = trace.unusable[name]
+                    diags.append(replace(bad, message=f"rule '{rule.name}' reads signal '{name}': {bad.message}"))
+                elif name not in trace.columns and name not in missing:
                     missing.append(name)
                     close = difflib.get_close_matches(name, known, n=1, cutoff=0.6)
                     hint = f"did you mean '{close[0]}'?" if close else f"the trace has columns: {', '.join(known) or '(none)'}"
