@@ -33,7 +33,8 @@ def files(tmp_path: Path) -> dict[str, Path]:
 
 
 def test_shipped_tree_is_clean() -> None:
-    res = run("check", str(ROOT / "rules"), str(ROOT / "maps"), str(ROOT / "scenarios"), str(ROOT / "examples"), "-f", "json")
+    ex = ROOT / "examples"
+    res = run("check", str(ROOT / "rules"), str(ROOT / "maps"), str(ROOT / "scenarios"), str(ex / "scenario"), str(ex / "monitor"), "-f", "json")
     payload = json.loads(res.stdout)
     assert res.exit_code == 0, res.stdout
     assert payload["diagnostics"] == [] and payload["files_checked"] >= 4 + 3 + 4 + 2
@@ -138,3 +139,14 @@ def test_console_script_runs_as_a_subprocess() -> None:
     cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "twolevel"]
     out = subprocess.run(cmd + ["check", "-f", "concise", str(ROOT / "rules")], capture_output=True, text=True, env={**os.environ, "GITHUB_ACTIONS": ""})
     assert out.returncode == 0 and out.stdout == "" and "Traceback" not in out.stderr
+
+
+def test_the_flawed_example_reports_what_its_readme_shows() -> None:
+    readme = (ROOT / "examples" / "check" / "README.md").read_text()
+    expected = [line for line in readme.splitlines() if line.startswith("examples/check/flawed.stl:")]
+    res = subprocess.run(
+        [sys.executable, "-m", "twolevel", "check", "examples/check/flawed.stl", "--dt", "0.1", "--horizon", "10", "-f", "concise"],
+        capture_output=True, text=True, cwd=ROOT,
+    )
+    assert res.returncode == 1
+    assert res.stdout.splitlines() == expected
