@@ -29,7 +29,7 @@ from twolevel.diagnostics import Diagnostic
 from twolevel.milp.builder import ModelBuilder
 from twolevel.milp.collision import collision_free_builtin
 from twolevel.milp.encode import AffineSignal, Encoding, Requirement, encode
-from twolevel.milp.model import MilpModel, PatternCache
+from twolevel.milp.model import MilpModel, PatternCache, Residuals
 from twolevel.models.params import BicycleParams
 from twolevel.control.horizon import StepData
 
@@ -67,13 +67,29 @@ class Assembled:
     diagnostics: list[Diagnostic] = field(default_factory=list)
 
 
+class RowMatrix:
+    """A minimal CSR matrix (``indptr``, ``indices``, ``data``, ``shape``, ``@ x``) — what the
+    encoder reads of an :class:`AffineSignal`, without scipy's per-construction checks."""
+
+    __slots__ = ("indptr", "indices", "data", "shape")
+
+    def __init__(self, data: np.ndarray, indices: np.ndarray, indptr: np.ndarray, shape: tuple[int, int]) -> None:
+        self.data, self.indices, self.indptr, self.shape = data, indices, indptr, shape
+
+    def __matmul__(self, x: np.ndarray) -> np.ndarray:
+        out = np.zeros(self.shape[0])
+        rows = np.repeat(np.arange(self.shape[0]), np.diff(self.indptr))
+        np.add.at(out, rows, self.data * np.asarray(x)[self.indices])
+        return out
+
+
 def _affine(cols: np.ndarray, coefs: np.ndarray, offset: np.ndarray, past: np.ndarray, n: int) -> AffineSignal:
     """Signal with ``len(past)`` constant samples then one row per step: ``coefs[k] @ x[cols[k]] + offset[k]``."""
     H, m = cols.shape
     P = past.size
     indptr = np.concatenate([np.zeros(P + 1, np.int64), m * np.arange(1, H + 1)])
-    C = sp.csr_matrix((coefs.ravel().astype(float), cols.ravel(), indptr), shape=(P + H, n))
-    return AffineSignal(C, np.concatenate([past, offset]))
+    C = RowMatrix(coefs.ravel().astype(float), cols.ravel(), indptr, (P + H, n))
+    return AffineSignal(C, np.concatenate([past, offset]))  # type: ignore[arg-type]
 
 
 def trace_signals(step: StepData, lay: Layout, n: int, past: Mapping[str, np.ndarray], names: set[str]
@@ -160,26 +176,59 @@ def _dynamics(b: ModelBuilder, step: StepData, lay: Layout) -> None:
                np.concatenate([v_id.ravel(), v_a.ravel(), v_b.ravel()]), rhs.ravel(), rhs.ravel())
 
 
-def _cost(b: ModelBuilder, step: StepData, lay: Layout, w: Weights) -> None:
+@dataclass(frozen=True, eq=False)
+class _CostShape:
+    """The parts of the cost that depend only on (H, weights, n): residual matrix, weights, Hessian."""
+
+    F: sp.csr_matrix
+    w: np.ndarray
+    P: sp.csc_matrix
+    FtW: sp.csr_matrix  # Fᵀ diag(w)
+
+
+_COST_CACHE: dict[tuple, _CostShape] = {}
+
+
+def _cost_shape(lay: Layout, w: Weights, n: int) -> _CostShape:
     H = lay.x.shape[0]
-    n = b.n_cols
+    key = (H, w, n, int(lay.x[0, 0]), int(lay.u[0, 0]))
+    hit = _COST_CACHE.get(key)
+    if hit is not None:
+        return hit
     nu = 2 * H
     ucols = lay.u.ravel()
     r = np.arange(nu)
     F_u = sp.csr_matrix((np.ones(nu), (r, ucols)), shape=(nu, n))
-    # Δu: u_k − u_{k−1} (u_{−1} known)
     rd = np.concatenate([r, r[2:]])
     cd = np.concatenate([ucols, ucols[:-2]])
     vd = np.concatenate([np.ones(nu), -np.ones(nu - 2)])
     F_du = sp.csr_matrix((vd, (rd, cd)), shape=(nu, n))
-    g_du = np.zeros(nu)
-    g_du[:2] = step.u_prev
     nx = 4 * H
     F_x = sp.csr_matrix((np.ones(nx), (np.arange(nx), lay.x.ravel())), shape=(nx, n))
     F = sp.vstack([F_u, F_du, F_x]).tocsr()
-    g = np.concatenate([np.zeros(nu), g_du, step.omega.ravel()])
     wt = np.concatenate([np.full(nu, w.u), np.full(nu, w.du), np.tile(np.asarray(w.track, float), H)])
-    b.add_residuals(F, g, wt)
+    Hs = (F.T @ sp.diags(2.0 * wt) @ F).tocsc()
+    P = sp.triu(Hs).tocsc()
+    P.sum_duplicates()
+    out = _CostShape(F, wt, P, (F.T @ sp.diags(wt)).tocsr())
+    if len(_COST_CACHE) > 32:
+        _COST_CACHE.clear()
+    _COST_CACHE[key] = out
+    return out
+
+
+def _cost(model: MilpModel, step: StepData, lay: Layout, w: Weights) -> None:
+    """Put the paper's cost into ``model`` (P shared between models of the same shape)."""
+    H = lay.x.shape[0]
+    cs = _cost_shape(lay, w, model.n_cols)
+    nu = 2 * H
+    g = np.zeros(2 * nu + 4 * H)
+    g[nu:nu + 2] = step.u_prev
+    g[2 * nu:] = step.omega.ravel()
+    model.P = cs.P
+    model.q = model.q - 2.0 * (cs.FtW @ g)
+    model.c0 = model.c0 + float(cs.w @ (g * g))
+    model.residuals = Residuals(cs.F, g, cs.w)
 
 
 def assemble(
@@ -201,8 +250,8 @@ def assemble(
     others[:, P:, :] = hc.xy
     enc = encode(b, requirements, sigs, dt, eps=eps, length=T,
                  builtins={"collision_free": collision_free_builtin("x", "y", others)})
-    _cost(b, step, lay, weights)
     model = b.build(cache)
+    _cost(model, step, lay, weights)
     return Assembled(model, lay, enc, sigs, list(enc.diagnostics))
 
 

@@ -13,10 +13,10 @@ import math
 import numpy as np
 
 from twolevel.milp.encode import MIL501, MIL504, Builtin, EncodeError, Encoder, _span
-from twolevel.milp.robtree import INF, Op, Tree, add, mk, scale
+from twolevel.milp.robtree import INF, Block, Lin, Op, Tree, add, lin, mk, scale
 from twolevel.stl import ast
 
-__all__ = ["collision_free_builtin", "reachable_box"]
+__all__ = ["collision_free_builtin", "reachable_box", "CollisionBlock"]
 
 
 def collision_free_builtin(x: str, y: str, others: np.ndarray) -> Builtin:
@@ -28,6 +28,7 @@ def collision_free_builtin(x: str, y: str, others: np.ndarray) -> Builtin:
     removed by the encoder's interval pruning, exactly, given the ego's position bounds."""
     others = np.asarray(others, dtype=float)
     faces = ((1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0))
+    tables: dict[int, tuple[Encoder, _PairTable]] = {}
 
     def fn(enc: Encoder, args: tuple[ast.Term, ...], t: int, s: float, node: ast.Call) -> Tree:
         if len(args) != 1:
@@ -37,6 +38,21 @@ def collision_free_builtin(x: str, y: str, others: np.ndarray) -> Builtin:
         if not isinstance(d, float):
             raise EncodeError(MIL501("collision_free(d): d must be known at solve time", _span(node)))
         ex, ey = enc.signal_at(x, t), enc.signal_at(y, t)
+        o = others[:, t]
+        ok = np.isfinite(o).all(axis=1)
+        if not ok.any():
+            return s * INF
+        if isinstance(ex, float) and isinstance(ey, float):
+            return s * (float(np.min(np.abs(ex - o[ok, 0]) + np.abs(ey - o[ok, 1]))) - d)
+        if s > 0 and isinstance(ex, Lin) and isinstance(ey, Lin) and len(ex.idx) == 1 and len(ey.idx) == 1:
+            tb = tables.get(id(enc))
+            if tb is None or tb[0] is not enc:
+                tb = (enc, _PairTable.of(enc, x, y, others))
+                tables.clear()
+                tables[id(enc)] = tb
+            idx = tb[1].at(t)
+            if idx is not None:
+                return CollisionBlock(tb[1], idx, np.full(idx.size, d))
         pairs: list[Tree] = []
         for i in range(others.shape[0]):
             ox, oy = others[i, t]
@@ -59,3 +75,165 @@ def reachable_box(p0: float, v_lo: float, v_hi: float, dt: float, steps: int) ->
     ``p0 + k·dt·v_lo ≤ p_k ≤ p0 + k·dt·v_hi`` for k = 1..steps [m]."""
     k = np.arange(1, steps + 1) * dt
     return p0 + k * v_lo, p0 + k * v_hi
+
+
+_FA = np.array([1.0, 1.0, -1.0, -1.0])  # face signs on dx
+_FB = np.array([1.0, -1.0, 1.0, -1.0])  # face signs on dy
+
+
+class _PairTable:
+    """Every vehicle–step pair of a trace whose ego position is one column per coordinate, in
+    arrays sorted by step: ego ``xa·x[xc]``, offset ``xo`` = ego offset − vehicle position (same
+    for y); ``step``, ``veh``; ``start[t]:start[t+1]`` are the pairs of step t."""
+
+    __slots__ = ("xc", "xa", "xo", "yc", "ya", "yo", "step", "veh", "start", "ok_t")
+
+    @classmethod
+    def of(cls, enc: Encoder, x: str, y: str, others: np.ndarray) -> "_PairTable":
+        tb = cls()
+        sx, sy = enc.signals.get(x), enc.signals.get(y)
+        T = enc.T
+        if not (hasattr(sx, "coef") and hasattr(sy, "coef")):
+            tb.ok_t = np.zeros(T, bool)
+            tb.start = np.zeros(T + 1, np.int64)
+            return tb
+        cx, cy = sx.coef, sy.coef  # type: ignore[union-attr]
+        nx, ny = np.diff(cx.indptr), np.diff(cy.indptr)
+        tb.ok_t = (nx == 1) & (ny == 1)
+        fin = np.isfinite(others).all(axis=2)[:, :T] & tb.ok_t[None, :]  # (N, T)
+        t_idx, v_idx = np.nonzero(fin.T)
+        px, py = cx.indptr[t_idx], cy.indptr[t_idx]
+        tb.xc, tb.xa = cx.indices[px].astype(np.int64), cx.data[px].astype(float)
+        tb.yc, tb.ya = cy.indices[py].astype(np.int64), cy.data[py].astype(float)
+        tb.xo = sx.offset[t_idx] - others[v_idx, t_idx, 0]  # type: ignore[union-attr]
+        tb.yo = sy.offset[t_idx] - others[v_idx, t_idx, 1]  # type: ignore[union-attr]
+        tb.step, tb.veh = t_idx, v_idx
+        tb.start = np.searchsorted(t_idx, np.arange(T + 1))
+        return tb
+
+    def at(self, t: int) -> np.ndarray | None:
+        if not self.ok_t[t]:
+            return None
+        return np.arange(self.start[t], self.start[t + 1])
+
+
+class CollisionBlock(Block):
+    """``min`` over vehicle–step pairs (rows ``idx`` of a :class:`_PairTable`) of the 1-norm
+    diamond robustness: dx = xa·x[xc] + xo, dy = ya·x[yc] + yo (ego minus vehicle), value
+    |dx| + |dy| − d. Several blocks under one ``min`` merge into one, so a whole
+    ``always[..] collision_free(d)`` is emitted by one vectorised call: pairs that always hold are
+    dropped, faces that can never hold are dropped, one face left gives a plain row, two or more a
+    disjunction (one binary per face, big-M from the bounds)."""
+
+    __slots__ = ("tb", "idx", "d", "_cache")
+
+    def __init__(self, tb: _PairTable, idx: np.ndarray, d: np.ndarray) -> None:
+        self.tb, self.idx, self.d = tb, idx, d
+        self._cache: tuple | None = None
+
+    def _arr(self) -> tuple[np.ndarray, ...]:
+        if self._cache is None:
+            tb, i = self.tb, self.idx
+            self._cache = (tb.xc[i], tb.xa[i], tb.xo[i], tb.yc[i], tb.ya[i], tb.yo[i], tb.step[i], tb.veh[i])
+        return self._cache
+
+    @classmethod
+    def merge(cls, blocks: list["Block"]) -> "CollisionBlock":
+        tbs = {id(b.tb) for b in blocks}  # type: ignore[attr-defined]
+        if len(tbs) != 1:
+            return _merge_tables(blocks)
+        return cls(blocks[0].tb, np.concatenate([b.idx for b in blocks]),  # type: ignore[attr-defined]
+                   np.concatenate([b.d for b in blocks]))  # type: ignore[attr-defined]
+
+    def _ranges(self, lb: np.ndarray, ub: np.ndarray) -> tuple[np.ndarray, ...]:
+        xc, xa, xo, yc, ya, yo, _, _ = self._arr()
+        a1, a2 = xa * lb[xc], xa * ub[xc]
+        b1, b2 = ya * lb[yc], ya * ub[yc]
+        return (np.minimum(a1, a2) + xo, np.maximum(a1, a2) + xo,
+                np.minimum(b1, b2) + yo, np.maximum(b1, b2) + yo)
+
+    def bounds(self, lb: np.ndarray, ub: np.ndarray) -> tuple[float, float]:
+        xlo, xhi, ylo, yhi = self._ranges(lb, ub)
+        lo = np.maximum(np.maximum(xlo, -xhi), 0.0) + np.maximum(np.maximum(ylo, -yhi), 0.0)
+        hi = np.maximum(np.abs(xlo), np.abs(xhi)) + np.maximum(np.abs(ylo), np.abs(yhi))
+        return float(np.min(lo - self.d)), float(np.min(hi - self.d))
+
+    def expand(self) -> Tree:
+        xc, xa, xo, yc, ya, yo, _, _ = self._arr()
+        pairs: list[Tree] = []
+        for i in range(xc.size):
+            dx = lin((int(xc[i]),), (float(xa[i]),), float(xo[i]))
+            dy = lin((int(yc[i]),), (float(ya[i]),), float(yo[i]))
+            pairs.append(mk(True, [add(add(scale(dx, a), scale(dy, b)), -float(self.d[i]))
+                                   for a, b in zip(_FA, _FB)]))
+        return mk(False, pairs)
+
+    def emit(self, enc: Encoder, margin: float, guard: int) -> None:
+        """Rows for ``self ≥ margin`` (whenever ``x[guard] = 1``), vectorised."""
+        xc, xa, xo, yc, ya, yo, step, veh = self._arr()
+        xlo, xhi, ylo, yhi = self._ranges(enc.b.lb, enc.b.ub)
+        d = self.d[:, None]
+        # face f: a·dx + b·dy − d; its bounds over the box
+        f_hi = np.where(_FA > 0, xhi[:, None], -xlo[:, None]) + np.where(_FB > 0, yhi[:, None], -ylo[:, None]) - d
+        f_lo = np.where(_FA > 0, xlo[:, None], -xhi[:, None]) + np.where(_FB > 0, ylo[:, None], -yhi[:, None]) - d
+        pair_lo = (np.maximum(np.maximum(xlo, -xhi), 0.0) + np.maximum(np.maximum(ylo, -yhi), 0.0) - self.d)
+        live = pair_lo < margin
+        keep = (f_hi >= margin) & live[:, None]
+        nk = keep.sum(axis=1)
+        if np.any(live & (nk == 0)):
+            enc._fail(guard)
+        # constant part of each face: a·xo + b·yo − d − margin moves to the right-hand side
+        cst = _FA[None] * xo[:, None] + _FB[None] * yo[:, None] - d - margin
+        ca = _FA[None] * xa[:, None]
+        cb = _FB[None] * ya[:, None]
+        single = live & (nk == 1)
+        multi = live & (nk >= 2)
+        pi, fi = np.nonzero(keep & single[:, None])  # plain rows (one face left)
+        n1 = pi.size
+        if n1:
+            if guard >= 0:
+                M = margin - f_lo[pi, fi]
+                cols = np.stack([xc[pi], yc[pi], np.full(n1, guard)], 1)
+                vals = np.stack([ca[pi, fi], cb[pi, fi], -M], 1)
+                lo = -cst[pi, fi] - M
+            else:
+                cols = np.stack([xc[pi], yc[pi]], 1)
+                vals = np.stack([ca[pi, fi], cb[pi, fi]], 1)
+                lo = -cst[pi, fi]
+            rows = enc.emit_rows(cols, vals, lo)
+            if guard >= 0:
+                enc._rows_of_guard.setdefault(guard, []).extend(rows.tolist())
+        mp = np.flatnonzero(multi)  # disjunctions (two or more faces): one binary per kept face
+        if mp.size:
+            pi, fi = np.nonzero(keep[mp])
+            pi = mp[pi]
+            nb = pi.size
+            blk = enc.b.add_vars("cf", nb, 0.0, 1.0, integer=True)
+            enc.n_bin += nb
+            bcols = np.arange(blk.start, blk.stop)
+            M = margin - f_lo[pi, fi]
+            rows = enc.emit_rows(np.stack([xc[pi], yc[pi], bcols], 1),
+                                 np.stack([ca[pi, fi], cb[pi, fi], -M], 1), -cst[pi, fi] - M)
+            starts = np.concatenate([[0], np.cumsum(nk[mp])])
+            owner = np.repeat(np.arange(mp.size), nk[mp])
+            covers = enc.emit_grouped(owner, bcols, mp.size, extra_col=guard, lo=0.0 if guard >= 0 else 1.0)
+            bl = bcols.tolist()
+            for r, bc in zip(rows.tolist(), bl):
+                enc._rows_of_guard[bc] = [r]
+            st, vh = step[mp].tolist(), veh[mp].tolist()
+            for j in range(mp.size):
+                a, b = int(starts[j]), int(starts[j + 1])
+                enc.add_disjunction(bl[a:b], int(covers[j]), guard,
+                                    f"collision_free: vehicle {vh[j]} at step {st[j]}")
+
+
+def _merge_tables(blocks: list[Block]) -> CollisionBlock:
+    """Blocks from different tables (two collision_free calls): one table of their pairs."""
+    tb = _PairTable()
+    parts = [b._arr() for b in blocks]  # type: ignore[attr-defined]
+    for k, name in enumerate(("xc", "xa", "xo", "yc", "ya", "yo", "step", "veh")):
+        setattr(tb, name, np.concatenate([p[k] for p in parts]))
+    tb.ok_t = np.zeros(0, bool)
+    tb.start = np.zeros(1, np.int64)
+    d = np.concatenate([b.d for b in blocks])  # type: ignore[attr-defined]
+    return CollisionBlock(tb, np.arange(d.size), d)

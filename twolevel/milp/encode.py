@@ -40,7 +40,7 @@ import scipy.sparse as sp
 from twolevel.diagnostics import Code, Diagnostic, Severity, Span
 from twolevel.milp.builder import ModelBuilder
 from twolevel.milp.model import Disjunction
-from twolevel.milp.robtree import INF, Lin, Op, Tree, add, bounds, lin, mk, negate, scale
+from twolevel.milp.robtree import INF, Block, Lin, Op, Tree, add, bounds, lin, mk, negate, scale
 from twolevel.stl import ast
 
 __all__ = [
@@ -374,6 +374,43 @@ class Encoder:
             self._rows_of_guard.setdefault(guard, []).append(r)
         return r
 
+    def emit_rows(self, cols: np.ndarray, vals: np.ndarray, lo: np.ndarray) -> np.ndarray:
+        """Emit rows ``Σ_j vals[i, j]·x[cols[i, j]] ≥ lo[i]`` at once (unguarded bookkeeping is
+        the caller's); returns their global row indices."""
+        n, m = cols.shape
+        first = self._n
+        self._r.append(np.repeat(np.arange(first, first + n), m))
+        self._c.append(cols.ravel().astype(np.int64))
+        self._v.append(vals.ravel().astype(float))
+        self._lo.append(np.asarray(lo, float))
+        self._n += n
+        return self._row0 + np.arange(first, first + n)
+
+    def emit_grouped(self, owner: np.ndarray, cols: np.ndarray, n_groups: int, *, extra_col: int = -1,
+                     lo: float = 1.0) -> np.ndarray:
+        """One row per group ``g``: ``Σ_{owner[i] = g} x[cols[i]] (− x[extra_col]) ≥ lo`` (cover rows)."""
+        first = self._n
+        r = first + owner
+        c = cols
+        v = np.ones(cols.size)
+        if extra_col >= 0:
+            r = np.concatenate([r, first + np.arange(n_groups)])
+            c = np.concatenate([c, np.full(n_groups, extra_col)])
+            v = np.concatenate([v, -np.ones(n_groups)])
+        self._r.append(r.astype(np.int64))
+        self._c.append(np.asarray(c, np.int64))
+        self._v.append(v)
+        self._lo.append(np.full(n_groups, float(lo)))
+        self._n += n_groups
+        return self._row0 + np.arange(first, first + n_groups)
+
+    def add_disjunction(self, binaries: list[int], cover: int, guard: int, label: str = "",
+                        sources: tuple[object, ...] = ()) -> None:
+        """Record a disjunction whose rows were emitted (``_rows_of_guard`` filled by the caller)."""
+        did = len(self.b.disjunctions) + len(self._disj)
+        self._disj.append(dict(id=did, binaries=binaries, cover=cover, guard=guard,
+                               label=label or self._label, sources=sources))
+
     def _fail(self, guard: int) -> None:
         """The current requirement cannot hold: forbid the guard, or mark the model infeasible."""
         if guard >= 0:
@@ -393,6 +430,12 @@ class Encoder:
             return
         if isinstance(t, float) or isinstance(t, Lin):
             self._leaf(t, margin, guard, mhi)
+            return
+        if isinstance(t, Block):
+            if isinstance(margin, float):
+                t.emit(self, margin, guard)  # type: ignore[attr-defined]
+            else:
+                self.require(t.expand(), margin, guard)
             return
         if self._refs.get(id(t), 0) >= 2:
             z = self._shared.get(id(t))
@@ -487,7 +530,11 @@ class Encoder:
         cols = np.concatenate(self._c) if self._c else np.zeros(0, np.int64)
         vals = np.concatenate(self._v) if self._v else np.zeros(0)
         assert self.b.n_rows == self._row0, "rows added to the builder while encoding"
-        out = self.b.add_rows(name, self._n, rows, cols, vals, np.asarray(self._lo), INF)
+        if any(isinstance(v, np.ndarray) for v in self._lo):
+            lo = np.concatenate([np.atleast_1d(np.asarray(v, float)) for v in self._lo]) if self._lo else np.zeros(0)
+        else:
+            lo = np.asarray(self._lo, float)
+        out = self.b.add_rows(name, self._n, rows, cols, vals, lo, INF)
         for d in self._disj:
             self.b.add_disjunction(Disjunction(
                 id=d["id"], binaries=np.asarray(d["binaries"], np.int64),

@@ -13,7 +13,7 @@ from typing import Union
 
 import numpy as np
 
-__all__ = ["Lin", "Op", "Tree", "mk", "add", "scale", "negate", "bounds", "is_const"]
+__all__ = ["Lin", "Op", "Block", "Tree", "mk", "add", "scale", "negate", "bounds", "is_const"]
 
 INF = math.inf
 
@@ -46,7 +46,26 @@ class Op:
         return f"{'max' if self.is_max else 'min'}{self.kids}"
 
 
-Tree = Union[float, Lin, Op]
+class Block:
+    """A vectorised leaf: a whole family of min/max structure held in arrays (e.g. every
+    vehicle–step pair of ``collision_free``). Subclasses give :meth:`bounds`, :meth:`expand`
+    (the equivalent plain tree, used under negation or arithmetic), :meth:`emit` (the encoder's
+    rows, vectorised) and :meth:`merge` (the ``min`` of several blocks of the same type)."""
+
+    __slots__ = ()
+
+    def bounds(self, lb: np.ndarray, ub: np.ndarray) -> tuple[float, float]:
+        raise NotImplementedError
+
+    def expand(self) -> "Tree":
+        raise NotImplementedError
+
+    @classmethod
+    def merge(cls, blocks: list["Block"]) -> "Block":
+        raise NotImplementedError
+
+
+Tree = Union[float, Lin, Op, Block]
 
 
 def is_const(t: Tree) -> bool:
@@ -75,6 +94,10 @@ def mk(is_max: bool, kids: list[Tree] | tuple[Tree, ...]) -> Tree:
     neutral = -absorbing
     best: float | None = None
     out: list[Tree] = []
+    if not is_max:
+        blocks = [k for k in kids if isinstance(k, Block)]
+        if len(blocks) > 1 and all(type(b) is type(blocks[0]) for b in blocks):
+            kids = [k for k in kids if not isinstance(k, Block)] + [type(blocks[0]).merge(blocks)]
     for k in kids:
         if isinstance(k, float):
             if k == absorbing:
@@ -109,6 +132,8 @@ def scale(t: Tree, k: float) -> Tree:
         return 0.0
     if k == 1.0:
         return t
+    if isinstance(t, Block):
+        return scale(t.expand(), k)
     if isinstance(t, Lin):
         return Lin(t.idx, tuple(v * k for v in t.val), t.c * k)
     return Op(t.is_max if k > 0 else not t.is_max, tuple(scale(c, k) for c in t.kids))
@@ -120,6 +145,10 @@ def negate(t: Tree) -> Tree:
 
 def add(a: Tree, b: Tree) -> Tree:
     """``a + b``; a sum with a min/max distributes over its children."""
+    if isinstance(a, Block):
+        a = a.expand()
+    if isinstance(b, Block):
+        b = b.expand()
     if isinstance(a, Op):
         return mk(a.is_max, [add(k, b) for k in a.kids])
     if isinstance(b, Op):
@@ -143,6 +172,10 @@ def bounds(t: Tree, lb: np.ndarray, ub: np.ndarray,
     hit = memo.get(key)
     if hit is not None:
         return hit[0], hit[1]
+    if isinstance(t, Block):
+        res = t.bounds(lb, ub)
+        memo[key] = (res[0], res[1], t)
+        return res
     if isinstance(t, Lin):
         lo = hi = t.c
         for i, v in zip(t.idx, t.val):
