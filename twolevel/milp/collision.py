@@ -220,11 +220,12 @@ class CollisionBlock(Block):
             bl = bcols.tolist()
             for r, bc in zip(rows.tolist(), bl):
                 enc._rows_of_guard[bc] = [r]
-            st, vh = step[mp].tolist(), veh[mp].tolist()
+            st, vh, fl = step[mp].tolist(), veh[mp].tolist(), fi.tolist()
             for j in range(mp.size):
                 a, b = int(starts[j]), int(starts[j + 1])
-                enc.add_disjunction(bl[a:b], int(covers[j]), guard,
-                                    f"collision_free: vehicle {vh[j]} at step {st[j]}")
+                # sources: (built-in, vehicle, trace step, face (sign of dx, sign of dy)) per disjunct
+                src = tuple(("collision_free", vh[j], st[j], (_FA[f], _FB[f])) for f in fl[a:b])
+                enc.add_disjunction(bl[a:b], int(covers[j]), guard, "", src)
 
 
 def _merge_tables(blocks: list[Block]) -> CollisionBlock:
