@@ -1,0 +1,212 @@
+"""``twolevel plan``: one MPC problem of a scenario, solved and reported (library side).
+
+:func:`plan_scenario` builds the world at the scenario's start — or, with ``trace`` and ``at``,
+the ego state recorded at time ``at`` of a run (other traffic re-simulated to that time, reacting
+to the recorded ego; the recorded past as the rules' history) — solves one step with the chosen
+solver and returns a :class:`PlanReport` and diagnostics. An infeasible problem names the rules
+that conflict (:func:`explain_infeasibility`). ``emit`` writes the model (``.mps`` / ``.lp``; the
+linear part: with the HiGHS solver its L1 counterpart, which is the MILP HiGHS solves).
+Bad input comes back as diagnostics (YML4xx, STL2xx, MIL5xx), never as an exception.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from twolevel.control.codes import MIL511, MIL512, MIL513, MIL514, MIL516
+from twolevel.diagnostics import Diagnostic, Span
+
+__all__ = ["PlanReport", "plan_scenario", "explain_infeasibility"]
+
+
+@dataclass(frozen=True)
+class PlanReport:
+    """What ``twolevel plan`` prints: status, objective, solve times [ms], model size, the plan
+    rows (t [s], X [m], Y [m], ψ [rad], v [m/s], δ [rad], a [m/s²]; the last state has no
+    control: δ, a repeat the last), each rule's robustness, and the conflicting rules if any."""
+
+    status: str
+    objective: float
+    solve_ms: dict[str, float]
+    binaries: int
+    rows: int
+    columns: int
+    plan: tuple[tuple[float, ...], ...]
+    rules: tuple[tuple[str, float], ...]
+    solver: str = "highs"
+    qps: int = 0
+    certified: bool = False
+    conflicts: tuple[str, ...] = ()
+    message: str = ""
+    emitted: str | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        """The JSON object of ``--format json`` (non-finite numbers: null; a robustness of ±inf —
+        a rule trivially true or false — as the strings "inf"/"-inf")."""
+        def num(v: float) -> float | None:
+            return float(v) if math.isfinite(v) else None
+
+        out: dict[str, Any] = {
+            "status": self.status,
+            "objective": num(self.objective),
+            "solve_ms": {k: round(v, 4) for k, v in self.solve_ms.items()},
+            "binaries": self.binaries,
+            "rows": self.rows,
+            "columns": self.columns,
+            "plan": [[num(v) for v in row] for row in self.plan],
+            "rules": [{"name": n, "robustness": num(r) if math.isfinite(r) or math.isnan(r) else
+                       ("inf" if r > 0 else "-inf")} for n, r in self.rules],
+        }
+        if self.conflicts:
+            out["conflicts"] = list(self.conflicts)
+        if self.message:
+            out["message"] = self.message
+        return out
+
+    def table(self) -> tuple[tuple[str, ...], list[tuple[str, ...]]]:
+        """Header and rows of the default table output (formatted strings)."""
+        head = ("t [s]", "X [m]", "Y [m]", "psi [rad]", "v [m/s]", "delta [rad]", "a [m/s2]")
+        return head, [tuple(f"{v:.3f}" for v in row) for row in self.plan]
+
+
+def _read_trace(path: str, at: float) -> tuple[dict[str, np.ndarray] | None, list[Diagnostic]]:
+    span = Span(path)
+    p = Path(path)
+    if not p.is_file():
+        return None, [MIL516(f"trace file not found: {path}", span, hint="give RUN_DIR/trace.csv of a simulate run")]
+    try:
+        with open(p, newline="", encoding="utf-8") as fh:
+            rows = list(csv.DictReader(fh))
+    except (OSError, UnicodeDecodeError, csv.Error) as e:
+        return None, [MIL516(f"cannot read the trace: {e}", span)]
+    need = ("t", "x", "y", "psi", "v")
+    if not rows or any(k not in rows[0] for k in need):
+        return None, [MIL516(f"the trace needs the columns {', '.join(need)}", span)]
+    try:
+        cols = {k: np.array([float(r[k]) for r in rows]) for k in rows[0] if k in
+                ("t", "x", "y", "psi", "v", "delta", "gamma", "a")}
+    except (TypeError, ValueError) as e:
+        return None, [MIL516(f"a trace cell is not a number: {e}", span)]
+    t = cols["t"]
+    i = int(np.argmin(np.abs(t - at)))
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 0.1
+    if abs(t[i] - at) > dt / 2 + 1e-9:
+        return None, [MIL513(f"time {at} s is not in the trace ({t[0]:.2f} … {t[-1]:.2f} s)", span,
+                             hint="pick --at within the recorded run")]
+    return {k: v[: i + 1] for k, v in cols.items()}, []
+
+
+def explain_infeasibility(ctrl: Any, step: Any, past: Any, P: int) -> tuple[str, ...]:
+    """The rules that conflict: the smallest set (single rules first, then pairs) whose removal
+    makes the step feasible; empty when even no rules is infeasible or nothing single/pairwise helps."""
+    from twolevel.milp.highs import Status, solve_highs
+
+    names = [r.name for r in ctrl.rules]
+
+    def feasible(drop: frozenset[str]) -> bool:
+        asm = ctrl.build(step, past, P, drop=drop)
+        if asm.encoding.infeasible:
+            return False
+        sol = solve_highs(asm.model, time_limit=5.0)  # feasibility: the linear part is enough
+        return sol.status in (Status.OPTIMAL,) or (sol.status is Status.TIME_LIMIT and sol.x is not None)
+
+    if not feasible(frozenset(names)):
+        return ()
+    single = tuple(n for n in names if feasible(frozenset({n})))
+    if single:
+        return single
+    for i, a in enumerate(names):
+        for b in names[i + 1:]:
+            if feasible(frozenset({a, b})):
+                return (a, b)
+    return ()
+
+
+def plan_scenario(
+    scenario_path: str, *, solver: str = "highs", at: float | None = None, trace: str | None = None,
+    emit: str | None = None, time_limit: float | None = 10.0,
+) -> tuple[PlanReport | None, list[Diagnostic]]:
+    """Solve one MPC step of a scenario (see the module docstring). ``time_limit`` [s] per solve."""
+    from twolevel.control.high_level import SOLVERS, HighLevelController, MPCSettings
+    from twolevel.world.loader import load_scenario
+    from twolevel.world.world import build_world
+
+    span = Span(str(scenario_path))
+    if solver not in SOLVERS:
+        return None, [MIL512(f"unknown solver '{solver}'", span, hint=f"choose one of {', '.join(SOLVERS)}")]
+    if emit is not None and Path(emit).suffix.lower() not in (".mps", ".lp"):
+        return None, [MIL514(f"cannot emit '{emit}': the file must end in .mps or .lp", span)]
+    if (at is None) != (trace is None):
+        return None, [MIL513("--at and --trace go together (the state at time T of a recorded run)", span,
+                             hint="omit both to plan at the scenario's start")]
+    scn, diags = load_scenario(scenario_path)
+    if scn is None:
+        return None, diags
+    world = build_world(scn)
+    ws = world.settings
+    settings = MPCSettings(H=ws.H, dt=ws.dt, solver=solver, time_limit=time_limit)
+    ctrl, d2 = HighLevelController.from_world(world, settings)
+    diags += d2
+    if ctrl is None:
+        return None, diags
+    from twolevel.world.signals import signals_along
+    from twolevel.world.traffic import EgoBox, step as traffic_step
+
+    e = world.ego
+    ego = np.array([e.x, e.y, e.psi, e.v])
+    traffic = world.traffic0
+    history: dict[str, np.ndarray] = {}
+    t0 = 0.0
+    if trace is not None and at is not None:
+        rec, d3 = _read_trace(trace, at)
+        diags += d3
+        if rec is None:
+            return None, diags
+        n = rec["t"].size
+        ego = np.array([rec[k][-1] for k in ("x", "y", "psi", "v")])
+        t0 = float(rec["t"][-1])
+        for k in range(n - 1):  # other traffic, reacting to the recorded ego
+            traffic = traffic_step(traffic, float(rec["t"][k + 1] - rec["t"][k]), lanes=world.lanes,
+                                   parts=world.parts, limits=world.limits, lights=world.lights, stops=world.stops,
+                                   ego=EgoBox(rec["x"][k], rec["y"][k], rec["psi"][k], rec["v"][k], e.length),
+                                   stop_speed=ws.stop_speed)
+        if n > 1:
+            acc = rec.get("a", rec.get("gamma", np.zeros(n)))
+            past = {"x": rec["x"][:-1], "y": rec["y"][:-1], "psi": rec["psi"][:-1], "v": rec["v"][:-1],
+                    "delta": rec.get("delta", np.zeros(n))[:-1], "a": acc[:-1]}
+            history = signals_along(world, None, past, t0=float(rec["t"][0]), dt=ws.dt)
+    res = ctrl.solve(ego, t0, traffic, history)
+    conflicts: tuple[str, ...] = ()
+    if res.status not in ("optimal", "feasible"):
+        step, past_s, P = ctrl.prepare(ego, t0, traffic, history)
+        conflicts = explain_infeasibility(ctrl, step, past_s, P)
+        what = f"rules {', '.join(conflicts)} conflict" if conflicts else "no single rule or pair explains it"
+        diags.append(MIL511(f"no plan satisfies every rule at t = {t0:.2f} s: {what}", span,
+                            hint="dropping any one of the named rules makes the problem feasible"))
+    emitted = None
+    if emit is not None:
+        from twolevel.milp.highs import write_model
+        from twolevel.milp.transform import l1_surrogate
+
+        ctrl.reset()
+        step, past_s, P = ctrl.prepare(ego, t0, traffic, history)
+        asm = ctrl.build(step, past_s, P)
+        try:
+            write_model(l1_surrogate(asm.model) if solver == "highs" else asm.model, emit)
+            emitted = str(emit)
+        except OSError as e2:
+            diags.append(MIL514(f"cannot write {emit}: {e2}", span))
+    H, dt = ctrl.settings.H, ctrl.settings.dt
+    controls = np.vstack([res.controls, res.controls[-1:]])
+    plan = tuple((t0 + k * dt, *map(float, res.states[k]), *map(float, controls[k])) for k in range(H + 1))
+    report = PlanReport(res.status, res.cost, dict(res.timings_ms), res.binaries, res.rows, res.columns, plan,
+                        tuple(res.rule_robustness.items()), solver, res.qps, res.certified, conflicts, res.message,
+                        emitted)
+    return report, diags + [d for d in res.diagnostics if d not in diags]
