@@ -1,0 +1,299 @@
+"""The low-level controller: the paper's runtime monitor on the detailed model.
+
+Each step, given the MPC's optimal controls u* = [δ, a] over the horizon:
+
+1. forward-simulate the detailed four-wheel Pacejka model (:mod:`twolevel.models.rollout`,
+   compiled, batched) from the ego's current detailed state under u* (a → γ through the
+   actuation map at the speed the car has at each step);
+2. turn the predicted trajectory into the rules' signals (:mod:`twolevel.control.sensing`: the
+   definitions of :mod:`twolevel.world.signals`, the other vehicles' constant-velocity
+   predictions, ``collision_free`` as the oriented-box separation) and evaluate every rule with
+   the batched offline monitor (:mod:`twolevel.control.batch_monitor`);
+3. if every rule holds, apply u*_0 (decision ``mpc``); otherwise sample candidates in the ball of
+   radius r around u* (decision ``sampled``: the best-cost candidate that satisfies every rule);
+   if none of the sampling budget does, brake fully (decision ``brake``).
+
+**What "holds" means over a finite predicted window.** The trace a rule is judged on is the
+recorded history (the last P samples the rule's past operators can reach, P = its past depth
+/ dt) followed by the prediction k = 0..H (k = 0 is now). A rule *holds* for a candidate when
+its robustness at k = 1 — time t + dt, the first sample the candidate's control changes — is
+≥ 0, with every window truncated at the ends of that trace (RTAMT's offline semantics, as the
+MPC's encoding uses). Consequences, by design:
+
+* the current sample is not judged: nothing applied now can change it;
+* a future window reaching beyond t + H·dt is cut at the horizon: ``always`` is judged on the
+  part that is predicted, ``eventually`` must happen within it (``twolevel check`` warns about
+  rules longer than the horizon);
+* a rule the past has already decided (say ``historically`` over a violation) fails for every
+  candidate, so the car brakes: the paper's rule, and what a safety monitor should do.
+
+**The ball.** Candidates perturb u* by an offset held over the whole horizon (a consistent
+correction of the plan; its first element is applied), drawn uniformly from the disc of radius
+r in the normalised actuator space (δ/δ_max, γ), γ ∈ [−1, 1] the throttle/brake command (the
+space of the paper's CARLA controls, where r = 0.3), clipped to the actuator limits. Sampling
+is seeded per step from the run's seed (``numpy.random.default_rng((seed, step))``) and runs in
+rounds (32, 64, then the rest of the budget) so the usual case costs one small batch.
+
+**Cost of a candidate** (lower is better): Σ_{k=1..H} ‖p_k − p̂_k‖² + (v_k − v̂_k)² — the
+distance of its detailed trajectory from the MPC's planned one (p̂, v̂: ``target``; the plan
+already trades tracking of the waypoints against the rules) — plus ‖offset‖² in the normalised
+space. **Full brake**: γ = −1 with the MPC's steering.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from twolevel.control.batch_monitor import evaluate_rules_batch
+from twolevel.control.sensing import Memory, Others, others_predicted, sense
+from twolevel.models.actuation import accel_from_gamma, gamma_from_accel
+from twolevel.models.params import VehicleParams
+from twolevel.models.rollout import Backend, rollout, rollout_accel
+from twolevel.stl import analysis, ast
+from twolevel.stl.typecheck import RuleSet
+from twolevel.world.traffic import TrafficState
+from twolevel.world.world import World
+
+__all__ = ["LowLevelSettings", "Decision", "LowLevelController", "RuleCheck", "MAX_PAST"]
+
+MAX_PAST = 3000
+"""Past samples kept for a rule with an unbounded past operator (``once`` without a bound)."""
+
+
+@dataclass(frozen=True)
+class LowLevelSettings:
+    """``r``: radius of the sampling ball in (δ/δ_max, γ) [-]; ``samples``: the sampling budget
+    [candidates per step]; ``rounds``: candidates per round (the last is repeated until the
+    budget is spent); ``seed``: the run's seed; ``delta_max`` [rad]: steering limit;
+    ``backend``: rollout backend (:mod:`twolevel.models.rollout`)."""
+
+    r: float = 0.3
+    samples: int = 200
+    rounds: tuple[int, ...] = (32, 64)
+    seed: int = 0
+    delta_max: float = 0.5
+    backend: Backend = "auto"
+
+    def round_sizes(self) -> list[int]:
+        """Candidates per round, summing to ``samples``."""
+        out: list[int] = []
+        left = self.samples
+        i = 0
+        while left > 0:
+            k = min(self.rounds[min(i, len(self.rounds) - 1)] if self.rounds else left, left)
+            if i >= len(self.rounds):
+                k = left  # the rest in one batch
+            out.append(k)
+            left -= k
+            i += 1
+        return out
+
+
+@dataclass(frozen=True, eq=False)
+class RuleCheck:
+    """One rule as the low level judges it: name, self-contained formula, past depth [samples]."""
+
+    name: str
+    formula: ast.Node
+    past: int
+
+
+@dataclass(frozen=True, eq=False)
+class Decision:
+    """The low level's answer for one step.
+
+    ``decision``: ``mpc`` (u* holds), ``sampled`` or ``brake``; ``control`` = [δ rad, γ] applied
+    now; ``accel`` [m/s²]: the acceleration that γ commands at the current speed (quasi-static);
+    ``candidates``: sampled candidates evaluated (0 when u* held); ``robustness``: each rule's
+    robustness at t + dt for the applied choice (for ``brake``: the braking rollout's);
+    ``mpc_robustness``: u*'s; ``states`` (H+1, 12): the applied choice's predicted detailed
+    trajectory; ``timings_ms``: rollout / signals / monitor / total."""
+
+    decision: str
+    control: np.ndarray
+    accel: float
+    candidates: int
+    robustness: dict[str, float]
+    mpc_robustness: dict[str, float]
+    states: np.ndarray
+    timings_ms: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def violated(self) -> tuple[str, ...]:
+        """Rules u* violated (why the low level intervened)."""
+        return tuple(k for k, v in self.mpc_robustness.items() if not v >= 0)
+
+
+def rule_checks(rulesets: Sequence[RuleSet], dt: float) -> tuple[list[RuleCheck], dict[str, float]]:
+    """The rules of bound rule sets as :class:`RuleCheck` s (formulas self-contained, constants
+    substituted), and the constants (for rules that name them)."""
+    out: list[RuleCheck] = []
+    consts: dict[str, float] = {}
+    for rs in rulesets:
+        consts.update({k: float(v) for k, v in rs.consts.items() if v is not None})
+        for r in rs.rules:
+            f = rs.formula(r.name)
+            depth = analysis.past_depth(f, dt)
+            past = int(math.ceil(depth / dt - 1e-9)) if math.isfinite(depth) else MAX_PAST
+            out.append(RuleCheck(r.name, f, min(past, MAX_PAST)))
+    return out, consts
+
+
+class LowLevelController:
+    """The paper's bottom level (see the module docstring)."""
+
+    def __init__(self, world: World, rules: Sequence[RuleCheck], *, params: VehicleParams | None = None,
+                 settings: LowLevelSettings | None = None, consts: Mapping[str, float] | None = None) -> None:
+        self.world = world
+        self.rules = list(rules)
+        self.params = params or VehicleParams()
+        self.settings = settings or LowLevelSettings(r=world.settings.r, samples=world.settings.samples,
+                                                     seed=world.settings.seed)
+        self.consts = dict(consts or {})
+        self.H = world.settings.H
+        self.dt = world.settings.dt
+        self.past = max((r.past for r in self.rules), default=0)
+
+    @classmethod
+    def from_rulesets(cls, world: World, rulesets: Sequence[RuleSet], **kw: object) -> "LowLevelController":
+        rules, consts = rule_checks(rulesets, world.settings.dt)
+        return cls(world, rules, consts=consts, **kw)  # type: ignore[arg-type]
+
+    def warm_up(self, x0: np.ndarray) -> None:
+        """Build (and compile) the rollout functions for every batch size used, so the first
+        intervention does not pay for it."""
+        u = np.zeros((1, self.H, 2))
+        rollout_accel(x0, u, self.dt, self.params, self.settings.backend)
+        for k in set(self.settings.round_sizes()):
+            rollout(x0, np.zeros((k, self.H, 2)), self.dt, self.params, self.settings.backend)
+
+    # ------------------------------------------------------------------ evaluation
+    def _signals(self, states: np.ndarray, accel: np.ndarray, delta: np.ndarray, t: float, memory: Memory,
+                 others: Others, s0: float, history: Mapping[str, np.ndarray], P: int) -> dict[str, np.ndarray]:
+        """History ⊕ prediction: (K, P + H + 1) arrays of every signal."""
+        K, T, _ = states.shape
+        X, Y, psi = states[..., 0], states[..., 1], states[..., 2]
+        v = np.hypot(states[..., 3], states[..., 4]) * np.sign(states[..., 3])
+        v0 = max(float(v[0, 0]), 0.0)
+        tk = self.dt * np.arange(T)
+        center = s0 + v0 * tk
+        half = 5.0 + 0.5 * 10.0 * tk[-1] ** 2 + 2.0
+        pred = sense(self.world, t, self.dt, memory, others, X, Y, psi, v, accel, delta, s_center=center,
+                     half_window=half)
+        if P == 0:
+            return pred
+        out = {}
+        for name, arr in pred.items():
+            h = np.asarray(history[name], dtype=float)[-P:]
+            out[name] = np.concatenate([np.broadcast_to(h, (K, P)), arr], axis=1)
+        return out
+
+    def evaluate(self, signals: Mapping[str, np.ndarray], P: int) -> dict[str, np.ndarray]:
+        """Each rule's robustness (K,) at the first controlled sample (index P + 1)."""
+        at = min(P + 1, next(iter(signals.values())).shape[1] - 1)
+        full = evaluate_rules_batch([ast.Rule(r.name, r.formula) for r in self.rules], signals, self.dt,
+                                    consts=self.consts)
+        return {name: rob[:, at] for name, rob in full.items()}
+
+    def _history_length(self, history: Mapping[str, np.ndarray] | None) -> int:
+        if not history or self.past == 0:
+            return 0
+        return min([self.past] + [len(np.asarray(history.get(n, ()))) for n in _SIGNALS])
+
+    def _cost(self, states: np.ndarray, target: np.ndarray, offset: np.ndarray) -> np.ndarray:
+        dp = states[:, 1:, :2] - target[None, 1:, :2]
+        v = np.hypot(states[:, 1:, 3], states[:, 1:, 4])
+        dv = v - target[None, 1:, 3]
+        return (dp ** 2).sum(axis=(1, 2)) + (dv ** 2).sum(axis=1) + (offset ** 2).sum(axis=1)
+
+    # ------------------------------------------------------------------ one step
+    def decide(self, x0: np.ndarray, u_star: np.ndarray, t: float, traffic: TrafficState, memory: Memory, s0: float,
+               history: Mapping[str, np.ndarray] | None = None, *, target: np.ndarray | None = None,
+               step: int = 0) -> Decision:
+        """The control to apply now from the detailed state ``x0`` (12,), the MPC's controls
+        ``u_star`` (H, 2) [δ rad, a m/s²], time ``t`` [s], the traffic now, the sensing memory
+        before this step, the ego's route position ``s0`` [m], the recorded ``history`` of every
+        signal (oldest first, excluding now), the plan's states ``target`` (H+1, 4) [X, Y, ψ, v]
+        and the step number (seeds the sampling)."""
+        tm: dict[str, float] = {}
+        t_start = time.perf_counter()
+        p, st, H, dt = self.params, self.settings, self.H, self.dt
+        u_star = np.asarray(u_star, dtype=float).reshape(H, 2)
+        x0 = np.asarray(x0, dtype=float)
+        v_now = float(x0[3])
+        others = others_predicted(self.world, traffic, float(x0[0]), float(x0[1]), s0, v_now, H, dt)
+        P = self._history_length(history)
+        hist = history or {}
+
+        def judge(states: np.ndarray, accel: np.ndarray, delta: np.ndarray) -> dict[str, np.ndarray]:
+            t1 = time.perf_counter()
+            sig = self._signals(states, _extend(accel), _extend(delta), t, memory, others, s0, hist, P)
+            t2 = time.perf_counter()
+            rob = self.evaluate(sig, P)
+            tm["signals"] = tm.get("signals", 0.0) + (t2 - t1) * 1e3
+            tm["monitor"] = tm.get("monitor", 0.0) + (time.perf_counter() - t2) * 1e3
+            return rob
+
+        t0 = time.perf_counter()
+        ro = rollout_accel(x0, u_star[None], dt, p, st.backend)
+        tm["rollout"] = (time.perf_counter() - t0) * 1e3
+        gamma_star = gamma_from_accel(u_star[:, 1], ro.states[0, :-1, 3], p)
+        rob = judge(ro.states, u_star[None, :, 1], u_star[None, :, 0])
+        mpc_rob = {k: float(v[0]) for k, v in rob.items()}
+        if all(v >= 0 for v in mpc_rob.values()):
+            return self._done("mpc", np.array([u_star[0, 0], gamma_star[0]]), float(u_star[0, 1]), 0, mpc_rob,
+                              mpc_rob, ro.states[0], tm, t_start)
+
+        target = ro.states[0][:, [0, 1, 2, 3]] if target is None else np.asarray(target, dtype=float)
+        rng = np.random.default_rng((st.seed, step))
+        tried = 0
+        base = np.stack([u_star[:, 0] / st.delta_max, gamma_star], axis=1)  # (H, 2) normalised
+        for k in st.round_sizes():
+            radius = st.r * np.sqrt(rng.random(k))
+            angle = 2 * np.pi * rng.random(k)
+            offset = np.stack([radius * np.cos(angle), radius * np.sin(angle)], axis=1)  # (k, 2)
+            cand = base[None] + offset[:, None, :]
+            cand[..., 0] = np.clip(cand[..., 0], -1.0, 1.0) * st.delta_max
+            cand[..., 1] = np.clip(cand[..., 1], -1.0, 1.0)
+            t0 = time.perf_counter()
+            rc = rollout(x0, cand, dt, p, st.backend)
+            tm["rollout"] += (time.perf_counter() - t0) * 1e3
+            accel = accel_from_gamma(cand[..., 1], np.maximum(rc.states[:, :-1, 3], 0.0), p)
+            rob = judge(rc.states, accel, cand[..., 0])
+            tried += k
+            ok = np.all(np.stack([v >= 0 for v in rob.values()]), axis=0) if rob else np.ones(k, dtype=bool)
+            if ok.any():
+                cost = np.where(ok, self._cost(rc.states, target, offset), np.inf)
+                j = int(np.argmin(cost))
+                return self._done("sampled", cand[j, 0].copy(), float(accel[j, 0]), tried,
+                                  {n: float(v[j]) for n, v in rob.items()}, mpc_rob, rc.states[j], tm, t_start)
+
+        brake = np.stack([u_star[:, 0], -np.ones(H)], axis=1)
+        t0 = time.perf_counter()
+        rb = rollout(x0, brake[None], dt, p, st.backend)
+        tm["rollout"] += (time.perf_counter() - t0) * 1e3
+        accel = accel_from_gamma(brake[:, 1], np.maximum(rb.states[0, :-1, 3], 0.0), p)
+        rob = judge(rb.states, accel[None], brake[None, :, 0])
+        return self._done("brake", brake[0].copy(), float(accel[0]), tried, {n: float(v[0]) for n, v in rob.items()},
+                          mpc_rob, rb.states[0], tm, t_start)
+
+    def _done(self, decision: str, control: np.ndarray, accel: float, tried: int, rob: dict[str, float],
+              mpc_rob: dict[str, float], states: np.ndarray, tm: dict[str, float], t_start: float) -> Decision:
+        tm["total"] = (time.perf_counter() - t_start) * 1e3
+        return Decision(decision, control, accel, tried, rob, mpc_rob, states, tm)
+
+
+_SIGNALS = ("x", "y", "psi", "v", "a", "delta", "s", "e", "v_max", "d_stop", "light_red", "d_light", "d_lead",
+            "v_lead", "min_gap", "n_near")
+
+
+def _extend(u: np.ndarray) -> np.ndarray:
+    """Inputs (K, H) → per-sample values (K, H+1): sample k carries the input applied from k on,
+    the last sample repeats the last input."""
+    u = np.atleast_2d(u)
+    return np.concatenate([u, u[:, -1:]], axis=1)

@@ -1,0 +1,261 @@
+"""What the ego senses: the rules' named signals over K predicted trajectories at once.
+
+The definitions are those of :mod:`twolevel.world.signals` (the reference; the tests check
+that these values equal :func:`~twolevel.world.signals.signals_along` on the same trajectory),
+written for the closed loop:
+
+* **batched** over K candidate trajectories of T samples (the low level evaluates every
+  candidate in one pass of numpy calls);
+* **incremental**: what the definitions need from the past (stop signs served, the current
+  standstill at each stop line, lights crossed and whether on red) is a :class:`Memory`
+  carried from step to step, so the current sample costs O(1), not a replay of the run.
+
+Other vehicles are :class:`Others`: their poses over the same T samples (the actual traffic for
+the current step; constant-velocity predictions over the horizon for the low level, as
+:func:`~twolevel.world.signals.horizon_constants` predicts them for the MPC). Sensing is limited
+to ``r_near`` [m] at every sample. Units: m, rad, m/s, s.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from twolevel.world.signals import PASS_MARGIN, STOP_ZONE, StopMemory, update_stop_memory
+from twolevel.world.traffic import RED, YELLOW, TrafficState
+from twolevel.world.world import World
+
+__all__ = ["Memory", "Others", "others_now", "others_predicted", "sense", "rect_separation", "min_box_gap"]
+
+
+@dataclass(frozen=True)
+class Memory:
+    """The past as the signal definitions need it: the stop-sign memory (one entry per stop line
+    on the route), and per light on the route whether the ego has crossed its line and whether
+    the light was red when it did."""
+
+    stops: StopMemory
+    crossed: tuple[bool, ...]
+    on_red: tuple[bool, ...]
+
+    @classmethod
+    def fresh(cls, world: World) -> "Memory":
+        n = len(world.route_lights)
+        return cls(StopMemory.fresh(world), (False,) * n, (False,) * n)
+
+    def after(self, world: World, t: float, s: float, v: float) -> "Memory":
+        """The memory once the sample at time ``t`` [s], route position ``s`` [m] and speed
+        ``v`` [m/s] has been taken (stop lines served, lights crossed)."""
+        stops = update_stop_memory(self.stops, world, s, v, world.settings.dt)
+        d = world.route_lights - s
+        crossed = np.asarray(self.crossed, dtype=bool)
+        new = (d < 0) & ~crossed
+        state = world.lights.state_at(t)[world.route_light_index] if len(d) else np.zeros(0, int)
+        on_red = np.where(new, state == RED, np.asarray(self.on_red, dtype=bool))
+        return Memory(stops, tuple(bool(c) for c in crossed | new), tuple(bool(r) for r in on_red))
+
+
+@dataclass(frozen=True, eq=False)
+class Others:
+    """n other vehicles over T samples: centres ``x``/``y`` (n, T) [m], heading ``psi`` (n, T)
+    [rad], speed ``v`` (n, T) [m/s], route coordinates ``s``/``e`` (n, T) [m], boxes ``length``/
+    ``width`` (n,) [m] and their participant ``index`` (n,)."""
+
+    x: np.ndarray
+    y: np.ndarray
+    psi: np.ndarray
+    v: np.ndarray
+    s: np.ndarray
+    e: np.ndarray
+    length: np.ndarray
+    width: np.ndarray
+    index: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return int(self.x.shape[0])
+
+
+def _others(world: World, idx: np.ndarray, x: np.ndarray, y: np.ndarray, psi: np.ndarray, v: np.ndarray,
+            s_center: np.ndarray, half: float) -> Others:
+    n, T = x.shape
+    if n:
+        s, e = world.route.project_near(np.stack([x.ravel(), y.ravel()], axis=1),
+                                        np.broadcast_to(s_center[None, :], (n, T)).ravel(), half)
+        s, e = s.reshape(n, T), e.reshape(n, T)
+    else:
+        s = e = np.zeros((0, T))
+    return Others(x, y, psi, v, s, e, world.parts.length[idx], world.parts.width[idx], idx)
+
+
+def others_now(world: World, traffic: TrafficState, x: float, y: float, s0: float) -> Others:
+    """The vehicles within ``r_near`` of the ego at (x, y) [m] now (T = 1); ``s0`` [m] is the
+    ego's route position (where their projections are searched)."""
+    r_near = world.settings.r_near
+    idx = np.flatnonzero(traffic.active & (np.hypot(traffic.x - x, traffic.y - y) <= r_near))
+    col = lambda a: a[idx][:, None]  # noqa: E731
+    return _others(world, idx, col(traffic.x), col(traffic.y), col(traffic.psi), col(traffic.v), np.array([s0]),
+                   r_near + 5.0)
+
+
+def others_predicted(world: World, traffic: TrafficState, x: float, y: float, s0: float, v0: float, H: int,
+                     dt: float) -> Others:
+    """Constant-velocity predictions over k = 0..H of the vehicles within ``r_near`` now (as
+    :func:`~twolevel.world.signals.horizon_constants` predicts them)."""
+    r_near = world.settings.r_near
+    idx = np.flatnonzero(traffic.active & (np.hypot(traffic.x - x, traffic.y - y) <= r_near))
+    tk = dt * np.arange(H + 1)
+    v = traffic.v[idx]
+    psi = traffic.psi[idx]
+    px = traffic.x[idx, None] + (v * np.cos(psi))[:, None] * tk[None]
+    py = traffic.y[idx, None] + (v * np.sin(psi))[:, None] * tk[None]
+    rep = lambda a: np.repeat(a[:, None], H + 1, axis=1)  # noqa: E731
+    reach = float(np.max(v, initial=0.0) + abs(v0) + 10.0) * H * dt
+    return _others(world, idx, px, py, rep(psi), rep(v), s0 + max(v0, 0.0) * tk, r_near + 5.0 + reach)
+
+
+def rect_separation(x1: np.ndarray, y1: np.ndarray, psi1: np.ndarray, l1: np.ndarray | float, w1: np.ndarray | float,
+                    x2: np.ndarray, y2: np.ndarray, psi2: np.ndarray, l2: np.ndarray | float,
+                    w2: np.ndarray | float) -> np.ndarray:
+    """Signed separation [m] of oriented rectangles (centre, heading, length, width), elementwise
+    with broadcasting: the distance between them when apart, minus the smallest overlap of their
+    projections on the four edge normals (SAT) when they overlap — the value of :func:`twolevel.models.obb.box_separation`, computed from
+    poses (corner-to-rectangle distances in each box's frame), several times faster."""
+    c1, s1, c2, s2 = np.cos(psi1), np.sin(psi1), np.cos(psi2), np.sin(psi2)
+    h1, k1, h2, k2 = np.asarray(l1) / 2, np.asarray(w1) / 2, np.asarray(l2) / 2, np.asarray(w2) / 2
+    dx, dy = x2 - x1, y2 - y1
+    # SAT: overlap along the four edge normals
+    depth = None
+    for ax, ay in ((c1, s1), (-s1, c1), (c2, s2), (-s2, c2)):
+        e1 = h1 * np.abs(c1 * ax + s1 * ay) + k1 * np.abs(-s1 * ax + c1 * ay)
+        e2 = h2 * np.abs(c2 * ax + s2 * ay) + k2 * np.abs(-s2 * ax + c2 * ay)
+        ov = np.minimum(e1 + e2 - np.abs(dx * ax + dy * ay), 2 * np.minimum(e1, e2))  # interval overlap
+        depth = ov if depth is None else np.minimum(depth, ov)
+    # apart: the nearest feature pair is a corner of one box and the other box
+    gap = None
+    for (px, py, pc, ps, ph, pk), (qc, qs, qh, qk, sign) in (
+        ((x1, y1, c1, s1, h1, k1), (c2, s2, h2, k2, 1.0)),
+        ((x2, y2, c2, s2, h2, k2), (c1, s1, h1, k1, -1.0)),
+    ):
+        # corner offsets of box p relative to the centre of box q, in q's frame
+        ox, oy = -sign * dx, -sign * dy  # p's centre minus q's centre
+        bx, by = ox * qc + oy * qs, -ox * qs + oy * qc
+        for sx, sy in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+            cx = sx * ph * pc - sy * pk * ps
+            cy = sx * ph * ps + sy * pk * pc
+            u = bx + cx * qc + cy * qs
+            w = by - cx * qs + cy * qc
+            d = np.hypot(np.maximum(np.abs(u) - qh, 0.0), np.maximum(np.abs(w) - qk, 0.0))
+            gap = d if gap is None else np.minimum(gap, d)
+    return np.where(depth > 0.0, -depth, gap)
+
+
+def min_box_gap(x: np.ndarray, y: np.ndarray, psi: np.ndarray, length: float, width: float, others: Others,
+                near: np.ndarray, dist: np.ndarray) -> np.ndarray:
+    """Minimum signed box separation (K, T) [m] between the ego's poses (K, T) and the ``near``
+    (K, T, n) others (+inf where none is near). Exact: pairs whose bounding-circle lower bound
+    exceeds the smallest inscribed-circle upper bound cannot be the nearest and are skipped."""
+    K, T = x.shape
+    if others.n == 0 or not near.any():
+        return np.full((K, T), np.inf)
+    r_out = 0.5 * np.hypot(length, width) + 0.5 * np.hypot(others.length, others.width)
+    r_in = 0.5 * width + 0.5 * others.width
+    ub = np.where(near, dist - r_in, np.inf).min(axis=-1, keepdims=True)
+    pick = near & (dist - r_out <= ub)
+    k, t, i = np.nonzero(pick)
+    sep = rect_separation(x[k, t], y[k, t], psi[k, t], length, width, others.x[i, t], others.y[i, t],
+                          others.psi[i, t], others.length[i], others.width[i])
+    out = np.full((K, T), np.inf)
+    np.minimum.at(out, (k, t), sep)
+    return out
+
+
+def sense(world: World, t0: float, dt: float, memory: Memory, others: Others, x: np.ndarray, y: np.ndarray,
+          psi: np.ndarray, v: np.ndarray, a: np.ndarray, delta: np.ndarray, *, s_center: np.ndarray | None = None,
+          half_window: float = 10.0) -> dict[str, np.ndarray]:
+    """Every provided signal (K, T) along K ego trajectories sampled every ``dt`` [s] from ``t0``
+    [s]: poses x, y [m], psi [rad], speed v [m/s] and inputs a [m/s²], delta [rad], each (K, T).
+    ``memory`` is the state of the past *before* sample 0; ``others`` the other vehicles at the
+    same T samples. Route projections search ``s_center`` (T,) ± ``half_window`` [m]
+    (default: the whole route)."""
+    K, T = x.shape
+    route = world.route
+    pts = np.stack([x.ravel(), y.ravel()], axis=1)
+    if s_center is None:
+        s, e = route.local_coordinates(pts)
+    else:
+        s, e = route.project_near(pts, np.broadcast_to(s_center, (K, T)).ravel(), half_window)
+    s, e = s.reshape(K, T), e.reshape(K, T)
+    out: dict[str, np.ndarray] = {"x": x, "y": y, "psi": psi, "v": v, "a": a, "delta": delta, "s": s, "e": e,
+                                  "v_max": route.limit_at(s).astype(float)}
+    out["d_stop"] = _stop_distance(world, memory.stops, s, v, dt)
+    out["light_red"], out["d_light"] = _light(world, memory, t0 + dt * np.arange(T), s, v)
+    out.update(_lead_and_gap(world, others, x, y, psi, s, e, v))
+    return out
+
+
+def _stop_distance(world: World, mem: StopMemory, s: np.ndarray, v: np.ndarray, dt: float) -> np.ndarray:
+    if len(world.route_stops) == 0:
+        return np.full(s.shape, np.inf)
+    st = world.settings
+    d = world.route_stops - s[..., None]  # (K, T, J)
+    zone = (d >= -PASS_MARGIN) & (d <= st.r_near)
+    cond = (v <= st.stop_speed)[..., None] & (d >= -PASS_MARGIN) & (d <= STOP_ZONE)
+    idx = np.arange(s.shape[1])[None, :, None]
+    last_false = np.maximum.accumulate(np.where(~cond, idx, -1), axis=1)
+    still = np.asarray(mem.still)
+    base = np.where(still >= 0, still + dt, 0.0)
+    duration = np.where(last_false >= 0, (idx - last_false - 1) * dt, base + idx * dt)
+    need = world.stops.stop_time[world.route_stop_index]
+    done = cond & (duration >= need - 1e-9)
+    served = np.asarray(mem.served, dtype=bool) | np.logical_or.accumulate(done, axis=1)
+    return np.where(zone & ~served, d, np.inf).min(axis=-1)
+
+
+def _light(world: World, mem: Memory, t: np.ndarray, s: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    K, T = s.shape
+    if len(world.route_lights) == 0:
+        return np.zeros((K, T)), np.full((K, T), np.inf)
+    st = world.settings
+    d = world.route_lights - s[..., None]  # (K, T, Q)
+    state = world.lights.state_at(t)[:, world.route_light_index][None]  # (1, T, Q)
+    must = (state == RED) | ((state == YELLOW) & (d >= v[..., None] ** 2 / (2 * st.yellow_decel)))
+    idx = np.arange(T)[None, :, None]
+    crossed = d < 0
+    first = np.where(crossed.any(axis=1), crossed.argmax(axis=1), T)  # (K, Q)
+    state_at_first = np.take_along_axis(np.broadcast_to(state, d.shape), np.minimum(first, T - 1)[:, None, :], axis=1)[:, 0]
+    before = np.asarray(mem.crossed, dtype=bool)[None]
+    c = np.where(before, -1, first)
+    on_red = np.where(before, np.asarray(mem.on_red, dtype=bool)[None], (state_at_first == RED) & (first < T))
+    applies = ((d >= 0) & (d <= st.r_near)) | ((idx >= c[:, None]) & on_red[:, None] & (d >= -PASS_MARGIN))
+    dd = np.where(applies, d, np.inf)
+    j = dd.argmin(axis=-1)[..., None]
+    d_light = np.take_along_axis(dd, j, axis=-1)[..., 0]
+    red = np.where(np.isfinite(d_light), np.take_along_axis(must, j, axis=-1)[..., 0], False).astype(float)
+    return red, d_light
+
+
+def _lead_and_gap(world: World, others: Others, x: np.ndarray, y: np.ndarray, psi: np.ndarray, s: np.ndarray,
+                  e: np.ndarray, v: np.ndarray) -> dict[str, np.ndarray]:
+    K, T = x.shape
+    out = {"d_lead": np.full((K, T), np.inf), "v_lead": v.astype(float).copy(), "min_gap": np.full((K, T), np.inf),
+           "n_near": np.zeros((K, T))}
+    if others.n == 0:
+        return out
+    ox, oy = others.x.T[None], others.y.T[None]  # (1, T, n)
+    dist = np.hypot(ox - x[..., None], oy - y[..., None])  # (K, T, n)
+    near = dist <= world.settings.r_near
+    out["n_near"] = near.sum(axis=-1).astype(float)
+    route = world.route
+    si, ei = others.s.T[None], others.e.T[None]
+    along = np.cos(others.psi.T - route.heading_at(others.s.T))[None]  # (1, T, n)
+    lead = near & (si > s[..., None]) & (np.abs(ei - e[..., None]) < route.width_at(others.s.T)[None] / 2) & (along > 0)
+    gap = np.where(lead, si - s[..., None] - (world.ego.length + others.length) / 2, np.inf)
+    best = gap.argmin(axis=-1)[..., None]
+    d_lead = np.take_along_axis(gap, best, axis=-1)[..., 0]
+    v_other = np.broadcast_to(others.v.T[None] * along, gap.shape)
+    out["d_lead"] = d_lead
+    out["v_lead"] = np.where(np.isfinite(d_lead), np.take_along_axis(v_other, best, axis=-1)[..., 0], v)
+    out["min_gap"] = min_box_gap(x, y, psi, world.ego.length, world.ego.width, others, near, dist)
+    return out
