@@ -40,7 +40,7 @@ from __future__ import annotations
 import math
 import time
 from collections import OrderedDict
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -72,7 +72,8 @@ _MPC_SIGNALS = frozenset({"x", "y", "psi", "v", "a", "delta", "s", "e", "v_max",
 class MPCSettings:
     """Horizon ``H`` [steps], period ``dt`` [s], cost ``weights``, ``solver``, ``time_limit`` per
     step [s] (None: no limit — the mode search's B&B runs to completion), certificate ``gap``
-    (relative), satisfaction margin ``eps``, and whether to evaluate ``rule_robustness``."""
+    (relative), satisfaction margin ``eps``, whether to evaluate ``rule_robustness``, and whether
+    to re-linearise (about the reference, then about braking) when the step is infeasible."""
 
     H: int = 10
     dt: float = 0.1
@@ -82,6 +83,7 @@ class MPCSettings:
     gap: float = 0.005
     eps: float = 1e-4
     monitor: bool = True
+    relinearise: bool = True
 
 
 @dataclass(frozen=True)
@@ -209,7 +211,8 @@ class HighLevelController:
         return [Requirement(r.name, r.formula, (P,)) for r in self.rules if r.name not in drop]  # type: ignore[arg-type]
 
     def prepare(self, ego_state: Sequence[float], t: float, world_state: TrafficState | Snapshot | None,
-                history: Mapping[str, np.ndarray] | None) -> tuple[StepData, dict[str, np.ndarray], int]:
+                history: Mapping[str, np.ndarray] | None, about: str = "plan"
+                ) -> tuple[StepData, dict[str, np.ndarray], int]:
         """Linearise and gather the step's constants; returns (step data, past samples, P)."""
         H, dt = self.settings.H, self.settings.dt
         traffic, memory = _unpack(world_state)
@@ -225,7 +228,7 @@ class HighLevelController:
         if "delta" in hist and "a" in hist and len(hist["delta"]) and len(hist["a"]):
             u_prev = np.array([hist["delta"][-1], hist["a"][-1]])
         step = prepare_step(self.world, np.asarray(ego_state, float), t, traffic, H=H, dt=dt, params=self.params,
-                            prev=prev, u_prev=u_prev, memory=memory, s_hint=self._s_hint)
+                            prev=prev, u_prev=u_prev, memory=memory, s_hint=self._s_hint, about=about)
         names = set().union(*(r.reads for r in self.rules)) if self.rules else set()
         depth = max((r.depth for r in self.rules), default=0)
         P = history_length(hist, names, depth)
@@ -267,6 +270,28 @@ class HighLevelController:
         t2 = time.perf_counter()
         tm["assembly"] = (t2 - t1) * 1e3
         res = solve_step(self, step, asm, tm, t0)
+        # the linearisation about the previous plan can be far from a plan that now has to differ
+        # (e.g. braking instead of swerving): re-linearise about the reference, then about braking
+        for about in ("reference", "brake") if self.settings.relinearise else ():
+            if res.ok or res.status == "time_limit" or (
+                    self.settings.time_limit is not None and (time.perf_counter() - t0) > self.settings.time_limit):
+                break
+            t3 = time.perf_counter()
+            step2, past2, P2 = self.prepare(ego_state, t, world_state, history, about=about)
+            asm2 = self.build(step2, past2, P2)
+            tm2: dict[str, float] = {}
+            res2 = solve_step(self, step2, asm2, tm2, t3)
+            for k, v in tm2.items():
+                if k != "total":
+                    tm[k] = tm.get(k, 0.0) + v
+            tm["relinearise"] = tm.get("relinearise", 0.0) + tm2["total"]
+            tm["total"] = (time.perf_counter() - t0) * 1e3
+            if res2.ok:
+                res = replace(res2, timings_ms=tm, qps=res.qps + res2.qps,
+                              message=f"re-linearised about the {about}")
+                step = step2
+            else:
+                res = replace(res, timings_ms=tm, qps=res.qps + res2.qps)
         if res.ok:
             self._prev = (t, res.states, res.controls, res.mode)
             self._s_hint = float(step.s_bar[1])

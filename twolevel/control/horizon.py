@@ -23,7 +23,7 @@ from twolevel.world.signals import HorizonConstants, StopMemory, horizon_constan
 from twolevel.world.traffic import TrafficState
 from twolevel.world.world import World
 
-__all__ = ["StepData", "prepare_step", "direction_box", "wrap_to"]
+__all__ = ["StepData", "prepare_step", "direction_box", "wrap_to", "history_length"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -107,11 +107,13 @@ def prepare_step(
     world: World, x0: np.ndarray, t: float, traffic: TrafficState, *, H: int, dt: float,
     params: BicycleParams, prev: tuple[np.ndarray, np.ndarray] | None = None,
     u_prev: np.ndarray | None = None, memory: StopMemory | None = None, s_hint: float | None = None,
+    about: str = "plan",
 ) -> StepData:
     """Everything known at time ``t`` [s] for ego state ``x0`` = (X, Y, ψ, v).
 
     ``prev`` = (states (H+1, 4), controls (H, 2)) of the previous plan, made one step ago; it is
-    shifted by one step to give the linearisation point. ``u_prev`` [δ, a] is the control applied
+    shifted by one step to give the linearisation point (``about="plan"``); ``about="reference"``
+    linearises about a rollout of the reference's controls, ``"brake"`` about full braking. ``u_prev`` [δ, a] is the control applied
     during the last step (for the ‖u_0 − u_{−1}‖² term; default the previous plan's first)."""
     route = world.route
     x0 = np.asarray(x0, dtype=float)[:4].copy()
@@ -126,7 +128,16 @@ def prepare_step(
     head = wrap_to(route.heading_at(s_ref), float(x0[2]))
     head = x0[2] + np.concatenate([[0.0], np.cumsum(wrap_to(np.diff(head), 0.0))])
     omega = np.column_stack([pts[1:], head[1:], v_ref[1:]])
-    if prev is not None:
+    if about == "brake":  # a braking rollout with the wheel straight (to standstill, no reversing)
+        us_bar = np.zeros((H, 2))
+        v = float(x0[3])
+        for k in range(H):
+            us_bar[k, 1] = max(params.a_min, -v / dt)
+            v = max(v + us_bar[k, 1] * dt, 0.0)
+        xs_bar = bicycle.rollout(x0, us_bar, dt, params)
+        if u_prev is None and prev is not None:
+            u_prev = prev[1][0]
+    elif prev is not None and about == "plan":
         ps, pu = prev
         us_bar = np.vstack([pu[1:], pu[-1:]])
         xs_bar = np.vstack([x0[None], ps[2:], bicycle.step(ps[-1], pu[-1], dt, params)[None]])

@@ -1,0 +1,81 @@
+"""Small scenarios for the MPC tests, written to a temporary directory, and a closed loop on the
+kinematic bicycle itself (the MPC's own model) with constant-velocity traffic."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from twolevel.control.high_level import HighLevelController, MPCSettings
+from twolevel.models import bicycle
+from twolevel.stl.lint import load_ruleset
+from twolevel.world.loader import load_scenario
+from twolevel.world.provided import PROVIDED_SIGNALS
+from twolevel.world.world import World, build_world
+
+REPO = Path(__file__).resolve().parents[2]
+MAPS = REPO / "maps"
+
+
+def make_world(tmp: Path, map_name: str, ego: str, route: str, participants: str = "[]",
+               extra: str = "", name: str = "t") -> World:
+    text = f"""kind: scenario
+name: {name}
+map: {MAPS / map_name}
+ego: {ego}
+route: {route}
+participants: {participants}
+{extra}
+run: {{duration: 10, seed: 0}}
+"""
+    p = tmp / f"{name}.yaml"
+    p.write_text(text)
+    scn, diags = load_scenario(p)
+    assert scn is not None, [d.message for d in diags]
+    return build_world(scn)
+
+
+def rules(tmp: Path, text: str, name: str = "r"):
+    p = tmp / f"{name}.stl"
+    p.write_text(text)
+    rs, diags = load_ruleset(str(p), dt=0.1, provided_signals=PROVIDED_SIGNALS)
+    assert rs is not None, [d.message for d in diags]
+    return rs
+
+
+def controller(world: World, rulesets, **kw) -> HighLevelController:
+    st = MPCSettings(H=10, dt=0.1, **{"time_limit": None, **kw})  # B&B to completion: deterministic
+    return HighLevelController(world, rulesets, st)
+
+
+def advance(traffic, dt: float):
+    """Constant-velocity traffic (heading kept)."""
+    return replace(traffic, t=traffic.t + dt, x=traffic.x + traffic.v * np.cos(traffic.psi) * dt,
+                   y=traffic.y + traffic.v * np.sin(traffic.psi) * dt)
+
+
+def closed_loop(ctrl: HighLevelController, world: World, steps: int, x0=None, history_names=()):
+    """Run ``steps`` MPC steps on the kinematic model; returns (states (steps+1, 4), results, traffic list)."""
+    e = world.ego
+    x = np.array([e.x, e.y, e.psi, e.v]) if x0 is None else np.asarray(x0, float)
+    traffic = world.traffic0
+    xs, res, tr = [x], [], [traffic]
+    dt = ctrl.settings.dt
+    hist: dict[str, list[float]] = {k: [] for k in history_names}
+    for k in range(steps):
+        h = {n: np.asarray(v) for n, v in hist.items()} if history_names else None
+        r = ctrl.solve(x, k * dt, traffic, h)
+        res.append(r)
+        if history_names:
+            from twolevel.world.signals import signals_along
+            sig = signals_along(world, None, {"x": np.array([x[0]]), "y": np.array([x[1]]), "psi": np.array([x[2]]),
+                                              "v": np.array([x[3]])}, t0=k * dt)
+            for n in history_names:
+                hist[n].append(float(sig[n][0]))
+        x = bicycle.step(x, r.controls[0], dt, ctrl.params)
+        traffic = advance(traffic, dt)
+        xs.append(x)
+        tr.append(traffic)
+    return np.array(xs), res, tr
