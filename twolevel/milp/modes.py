@@ -292,6 +292,8 @@ class ModeSearch:
         nodes = 0
 
         def prune_at() -> float:
+            if not np.isfinite(best[0]):
+                return np.inf
             return best[0] - max(bnb_gap * abs(best[0]), abs_tol)
 
         while heap:

@@ -24,6 +24,7 @@ from twolevel.milp.model import MilpModel, _build_pattern
 __all__ = ["FixedModeQP", "CAPABILITIES", "solve_fixed"]
 
 CAPABILITIES = frozenset({"qp", "lp"})
+_UNSET = object()
 
 
 def _status(s: object) -> Status:
@@ -93,7 +94,7 @@ class FixedModeQP:
         self._row_of_tri = np.concatenate(out_r[:3])  # Clarabel row of each model triplet
         self._tri_cols = np.repeat(np.arange(n), np.diff(A.indptr))
         self._src_rows = A.indices[self._src]
-        self._P_src: object = None
+        self._P_src: object = _UNSET
         self._Pf_ci: sp.csr_matrix | None = None
         # guard binary of each model row (big-M rows)
         self._guard = np.full(m, -1, np.int64)
