@@ -158,6 +158,7 @@ class LowLevelController:
         self.H = world.settings.H
         self.dt = world.settings.dt
         self.past = max((r.past for r in self.rules), default=0)
+        self._reads_a = any("a" in analysis.signals_read(r.formula) for r in self.rules)
 
     @classmethod
     def from_rulesets(cls, world: World, rulesets: Sequence[RuleSet], **kw: object) -> "LowLevelController":
@@ -179,12 +180,11 @@ class LowLevelController:
         K, T, _ = states.shape
         X, Y, psi = states[..., 0], states[..., 1], states[..., 2]
         v = np.hypot(states[..., 3], states[..., 4]) * np.sign(states[..., 3])
-        v0 = max(float(v[0, 0]), 0.0)
-        tk = self.dt * np.arange(T)
-        center = s0 + v0 * tk
-        half = 5.0 + 0.5 * 10.0 * tk[-1] ** 2 + 2.0
+        # each sample is projected near where its own path length puts it along the route
+        step = np.hypot(np.diff(X, axis=1), np.diff(Y, axis=1))
+        center = s0 + np.concatenate([np.zeros((K, 1)), np.cumsum(step, axis=1)], axis=1)
         pred = sense(self.world, t, self.dt, memory, others, X, Y, psi, v, accel, delta, s_center=center,
-                     half_window=half)
+                     half_window=3.0)
         if P == 0:
             return pred
         out = {}
@@ -204,6 +204,14 @@ class LowLevelController:
         if not history or self.past == 0:
             return 0
         return min([self.past] + [len(np.asarray(history.get(n, ()))) for n in _SIGNALS])
+
+    def _accel(self, gamma: np.ndarray, states: np.ndarray) -> np.ndarray:
+        """The acceleration signal (K, H) of candidates given as γ: what γ commands (the
+        quasi-static actuation map) when a rule reads ``a``, else the realised rate of change
+        of the predicted speed (cheaper, and no rule looks at it)."""
+        if self._reads_a:
+            return accel_from_gamma(gamma, np.maximum(states[:, :-1, 3], 0.0), self.params)
+        return np.diff(states[..., 3], axis=1) / self.dt
 
     def _cost(self, states: np.ndarray, target: np.ndarray, offset: np.ndarray) -> np.ndarray:
         dp = states[:, 1:, :2] - target[None, 1:, :2]
@@ -263,23 +271,25 @@ class LowLevelController:
             t0 = time.perf_counter()
             rc = rollout(x0, cand, dt, p, st.backend)
             tm["rollout"] += (time.perf_counter() - t0) * 1e3
-            accel = accel_from_gamma(cand[..., 1], np.maximum(rc.states[:, :-1, 3], 0.0), p)
+            accel = self._accel(cand[..., 1], rc.states)
             rob = judge(rc.states, accel, cand[..., 0])
             tried += k
             ok = np.all(np.stack([v >= 0 for v in rob.values()]), axis=0) if rob else np.ones(k, dtype=bool)
             if ok.any():
                 cost = np.where(ok, self._cost(rc.states, target, offset), np.inf)
                 j = int(np.argmin(cost))
-                return self._done("sampled", cand[j, 0].copy(), float(accel[j, 0]), tried,
+                a0 = float(accel_from_gamma(cand[j, 0, 1], max(float(x0[3]), 0.0), p))
+                return self._done("sampled", cand[j, 0].copy(), a0, tried,
                                   {n: float(v[j]) for n, v in rob.items()}, mpc_rob, rc.states[j], tm, t_start)
 
         brake = np.stack([u_star[:, 0], -np.ones(H)], axis=1)
         t0 = time.perf_counter()
         rb = rollout(x0, brake[None], dt, p, st.backend)
         tm["rollout"] += (time.perf_counter() - t0) * 1e3
-        accel = accel_from_gamma(brake[:, 1], np.maximum(rb.states[0, :-1, 3], 0.0), p)
-        rob = judge(rb.states, accel[None], brake[None, :, 0])
-        return self._done("brake", brake[0].copy(), float(accel[0]), tried, {n: float(v[0]) for n, v in rob.items()},
+        accel = self._accel(brake[None, :, 1], rb.states)
+        rob = judge(rb.states, accel, brake[None, :, 0])
+        a0 = float(accel_from_gamma(-1.0, max(float(x0[3]), 0.0), p))
+        return self._done("brake", brake[0].copy(), a0, tried, {n: float(v[0]) for n, v in rob.items()},
                           mpc_rob, rb.states[0], tm, t_start)
 
     def _done(self, decision: str, control: np.ndarray, accel: float, tried: int, rob: dict[str, float],

@@ -1,0 +1,178 @@
+"""What a closed-loop run reports: progress per step, collisions, and the closing summary.
+
+Plain frozen dataclasses (no numpy in the fields) so they go straight into ``run.json`` and the
+CLI's table. Times of the control step are wall-clock [ms]; everything else is simulated.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+__all__ = ["StepInfo", "Collision", "Closest", "RuleViolations", "RunSummary", "summarise"]
+
+#: Which controller level each decision belongs to (as the report counts them).
+LEVEL = {"mpc": "high", "fallback": "high", "sampled": "low", "brake": "low", "nmpc": "nmpc"}
+
+
+@dataclass(frozen=True)
+class StepInfo:
+    """One completed step, for a progress display: step ``step`` of ``steps``; simulated time
+    ``t`` of ``duration`` [s]; control rate ``rate_hz`` (control steps per second of controller
+    time over the last ~20 steps); this step's control time ``step_ms`` [ms]; nearby vehicles
+    ``n_near``; the ``decision``; ``realtime`` = simulated / wall time so far."""
+
+    step: int
+    steps: int
+    t: float
+    duration: float
+    rate_hz: float
+    step_ms: float
+    n_near: int
+    decision: str
+    realtime: float
+
+
+@dataclass(frozen=True)
+class Collision:
+    """An overlap of the ego's and another vehicle's boxes: from ``t`` to ``t_end`` [s], where
+    it began (``x``, ``y`` [m]), the other vehicle's id, and the deepest overlap ``gap`` [m] (< 0)."""
+
+    t: float
+    t_end: float
+    x: float
+    y: float
+    other: str
+    gap: float
+
+
+@dataclass(frozen=True)
+class Closest:
+    """How close one other vehicle came: its id, the smallest centre-to-centre distance [m]
+    and when [s]."""
+
+    other: str
+    distance: float
+    t: float
+
+
+@dataclass(frozen=True)
+class RuleViolations:
+    """Steps at which a rule's robustness (on the executed trace) was negative: how many, the
+    first time [s] and the worst robustness."""
+
+    rule: str
+    steps: int
+    first_t: float | None
+    worst: float
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    """The closing summary of a run (see :func:`twolevel.sim.engine.simulate_scenario`).
+
+    Control-step times [ms] cover both controller levels and the sensing they need (not the
+    plant or traffic simulation): median / p95 / p99 / max, and per level. ``control_rate_hz``
+    = steps per second of controller time; ``realtime`` = simulated time / wall time of the
+    whole loop. Tracking error [m] = |lateral offset| from the route. ``min_distance`` [m]: the
+    smallest centre-to-centre distance to any other vehicle (the paper's measure);
+    ``min_gap`` [m]: the smallest box separation (< 0: overlap); ``closest``: the five vehicles
+    that came closest (centre to centre), nearest first."""
+
+    scenario: str
+    run_dir: str
+    status: str
+    monitor: bool
+    controller: str
+    seed: int
+    duration: float
+    steps: int
+    wall_time_s: float
+    realtime: float
+    step_ms_median: float
+    step_ms_p95: float
+    step_ms_p99: float
+    step_ms_max: float
+    high_ms_median: float
+    high_ms_max: float
+    low_ms_median: float
+    low_ms_max: float
+    control_rate_hz: float
+    steps_over_budget: int
+    tracking_error_max: float
+    tracking_error_mean: float
+    speed_over_limit_max: float
+    min_distance: float
+    min_gap: float
+    collisions: tuple[Collision, ...] = ()
+    violations: tuple[RuleViolations, ...] = ()
+    closest: tuple[Closest, ...] = ()
+    decisions: Mapping[str, int] = field(default_factory=dict)
+    decisions_by_level: Mapping[str, int] = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-ready dict (infinities as the strings "inf"/"-inf", NaN as null)."""
+        return _clean(asdict(self))
+
+
+def _clean(v: Any) -> Any:
+    if isinstance(v, dict):
+        return {k: _clean(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_clean(x) for x in v]
+    if isinstance(v, float):
+        if math.isnan(v):
+            return None
+        if math.isinf(v):
+            return "inf" if v > 0 else "-inf"
+    return v
+
+
+def _pct(a: np.ndarray, q: float) -> float:
+    return float(np.percentile(a, q)) if a.size else math.nan
+
+
+def summarise(
+    *, scenario: str, run_dir: str, status: str, monitor: bool, controller: str, seed: int, dt: float,
+    wall_time_s: float, step_ms: Sequence[float], high_ms: Sequence[float], low_ms: Sequence[float],
+    tracking: Sequence[float], over_limit: Sequence[float], min_dist: Sequence[float], min_gap: Sequence[float],
+    decisions: Sequence[str], collisions: Sequence[Collision], robustness: Mapping[str, np.ndarray],
+    closest: Sequence[Closest] = (), budget_ms: float = 100.0,
+) -> RunSummary:
+    """The summary of the steps recorded so far."""
+    st, hi, lo = (np.asarray(a, dtype=float) for a in (step_ms, high_ms, low_ms))
+    n = int(st.size)
+    tr = np.asarray(tracking, dtype=float)
+    counts: dict[str, int] = {}
+    for d in decisions:
+        counts[d] = counts.get(d, 0) + 1
+    levels: dict[str, int] = {}
+    for d, c in counts.items():
+        levels[LEVEL.get(d, "other")] = levels.get(LEVEL.get(d, "other"), 0) + c
+    viol = []
+    for rule, rob in robustness.items():
+        rob = np.asarray(rob, dtype=float)[:n]
+        bad = np.flatnonzero(rob < 0)
+        viol.append(RuleViolations(rule, int(bad.size), float(bad[0] * dt) if bad.size else None,
+                                   float(rob.min()) if rob.size else math.nan))
+    total = float(st.sum())
+    return RunSummary(
+        scenario=scenario, run_dir=run_dir, status=status, monitor=monitor, controller=controller, seed=seed,
+        duration=round(n * dt, 9), steps=n, wall_time_s=round(wall_time_s, 3),
+        realtime=(n * dt / wall_time_s) if wall_time_s > 0 else math.inf,
+        step_ms_median=_pct(st, 50), step_ms_p95=_pct(st, 95), step_ms_p99=_pct(st, 99),
+        step_ms_max=float(st.max()) if n else math.nan,
+        high_ms_median=_pct(hi, 50), high_ms_max=float(hi.max()) if n else math.nan,
+        low_ms_median=_pct(lo, 50), low_ms_max=float(lo.max()) if n else math.nan,
+        control_rate_hz=(1000.0 * n / total) if total > 0 else math.nan,
+        steps_over_budget=int(np.count_nonzero(st > budget_ms)),
+        tracking_error_max=float(tr.max()) if tr.size else math.nan,
+        tracking_error_mean=float(tr.mean()) if tr.size else math.nan,
+        speed_over_limit_max=float(np.max(over_limit)) if len(over_limit) else math.nan,
+        min_distance=float(np.min(min_dist)) if len(min_dist) else math.inf,
+        min_gap=float(np.min(min_gap)) if len(min_gap) else math.inf,
+        collisions=tuple(collisions), violations=tuple(viol), closest=tuple(closest), decisions=counts, decisions_by_level=levels,
+    )
