@@ -1,0 +1,343 @@
+"""The NMPC baseline the paper compares against: one nonlinear program per step, casadi + IPOPT.
+
+Interface (the same as :class:`~twolevel.control.high_level.HighLevelController`, so the
+simulation engine can swap it in)::
+
+    ctrl = NmpcController(world, rulesets, settings=MPCSettings(), model="kinematic" | "fourwheel")
+    ctrl, diags = NmpcController.from_world(world, model="fourwheel")   # the scenario's rule files
+    res  = ctrl.solve(ego_state, t, world_state, history)               # -> PlanResult
+    ctrl.reset()
+
+Same horizon H, period dt, waypoints ω (:func:`twolevel.control.horizon.prepare_step`, the
+high level's own) and cost with the weights of ``settings.weights``; the rules that can be
+written smoothly become constraints, chosen from what the rule sets read:
+
+* a rule reading ``v_max``: v_k ≤ v_max,k (the limit at the predicted positions), relaxed to
+  what full braking allows when the ego is already too fast (v_0 + a_min·k·dt);
+* ``collision_free(d)`` in a rule: for each nearby vehicle's constant-velocity prediction an
+  order-4 superellipse in its frame with semi-axes (L_i + L_ego)/2 + d and (W_i + W_ego)/2 + d
+  (:mod:`twolevel.control.nmpc_nlp`), at most ``NmpcOptions.max_obstacles`` vehicles (the nearest;
+  the rest of the slots are far-away dummies);
+* a rule reading ``d_stop``: while a stop line applies (not yet served, within r_near), the ego
+  stays behind the line: t_lineᵀ(p_k − p_line) ≤ 0 (t_line the route's tangent at the line), and
+  at the last step it can still stop before it: t_lineᵀ(p_H − p_line) + v_H²/(2·D) ≤ 0,
+  D = ``NmpcOptions.stop_decel``. A position bound alone lets the plan reach the line at speed
+  at the end of the horizon, and the next step is infeasible; the terminal braking-distance
+  term keeps it feasible from step to step. (The term at every step instead makes the rows
+  nearly dependent and IPOPT crawls: 200 iterations instead of 12, measured.)
+* a rule reading ``light_red`` or ``d_light``: the same at every step k where the light is red.
+
+Anything else (e.g. ``keep_gap`` on d_lead, past operators) is not expressed; each such rule
+gets an ``MIL530`` warning at construction. The NLP is built once (:class:`NmpcProblem`) and
+warm-started each step from the previous solution shifted by one step, primal and dual.
+
+``ego_state``: (X, Y, ψ, v) for the kinematic model; the four-wheel model takes the full
+12-component detailed state (:mod:`twolevel.models.fourwheel`) when given one, else it starts
+from steady straight running at v. ``PlanResult.states`` is (H+1, 4) = [X, Y, ψ, v] in both
+(vx for the four-wheel model). Fields of the MILP controller that do not apply: ``mode`` empty,
+``binaries`` 0, ``certified`` False, ``gap`` NaN, ``rule_robustness`` {}; ``qps`` holds IPOPT's
+iteration count, ``rows``/``columns`` the NLP's constraints/variables, ``solver`` "nmpc-<model>".
+``timings_ms``: prepare, parameters, solve (IPOPT's wall time), total. An IPOPT failure gives
+'fallback': the previous plan shifted (or full braking) with IPOPT's status in ``message``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from twolevel.control.codes import MIL515
+from twolevel.control.high_level import MPCSettings, PlanResult, Snapshot, _unpack
+from twolevel.control.horizon import StepData, prepare_step
+from twolevel.control.nmpc_nlp import MODELS, NlpSolution, NmpcProblem
+from twolevel.diagnostics import Code, Diagnostic, Severity, Span
+from twolevel.models import fourwheel as fw
+from twolevel.models.params import BicycleParams, VehicleParams
+from twolevel.stl import analysis, ast
+from twolevel.stl.typecheck import RuleSet
+from twolevel.world.signals import StopMemory, update_stop_memory
+from twolevel.world.traffic import TrafficState
+from twolevel.world.world import World
+
+__all__ = ["NmpcOptions", "NmpcController", "MIL530", "MODELS"]
+
+MIL530 = Code("MIL530", "nmpc-rule-not-smooth", Severity.WARNING,
+              "A rule cannot be written as a smooth constraint of the NMPC baseline; the NMPC ignores it.")
+
+_FAR = 1.0e3  # [m] offset of the dummy obstacles
+
+
+@dataclass(frozen=True)
+class NmpcOptions:
+    """``max_obstacles``: obstacle slots in the NLP (fixed; nearest vehicles first) [-];
+    ``max_iter``/``tol``: IPOPT's (exact Hessian); ``retry``: after a failure, solve again with the
+    L-BFGS Hessian (``retry_max_iter`` iterations) before falling back; ``max_cpu_time`` [s] per solve (None: no limit); ``warm_start``:
+    start from the previous solution shifted, with its duals (``"primal"``: without duals, IPOPT's
+    cold initialisation of the multipliers); ``substeps``: internal steps per dt of the
+    four-wheel model (None: its own h_int); ``expand``: build the NLP as one SX graph (None:
+    kinematic yes, four-wheel no — expanding it takes ≈ 6 s to build, solves ≈ 2× faster);
+    ``stop_margin`` [m]: how far before a stop line the ego's point must stay; ``stop_decel``
+    [m/s²]: the deceleration in the can-still-stop term of the stop-line bound (None: half the
+    bicycle's |a_min|)."""
+
+    max_obstacles: int = 6
+    max_iter: int = 30
+    retry_max_iter: int = 100
+    retry: bool = True
+    tol: float = 1e-6
+    max_cpu_time: float | None = None
+    warm_start: bool | str = True
+    substeps: int | None = None
+    expand: bool | None = None
+    stop_margin: float = 0.0
+    stop_decel: float | None = None
+
+
+def _calls(node: ast.Node, name: str) -> list[ast.Call]:
+    return [n for n in node.walk() if isinstance(n, ast.Call) and n.name == name]
+
+
+class NmpcController:
+    """The paper's NMPC baseline (see the module docstring)."""
+
+    def __init__(self, world: World, rulesets: Sequence[RuleSet], settings: MPCSettings | None = None, *,
+                 model: str = "kinematic", params: BicycleParams | None = None,
+                 vehicle: VehicleParams | None = None, options: NmpcOptions | None = None) -> None:
+        if model not in MODELS:
+            raise ValueError(f"unknown NMPC model {model!r}; choose one of {', '.join(MODELS)}")
+        self.world = world
+        self.settings = settings or MPCSettings(H=world.settings.H, dt=world.settings.dt)
+        self.model = model
+        self.params = params or BicycleParams()
+        self.vehicle = vehicle or VehicleParams().with_overrides(
+            {k: v for k, v in world.ego.vehicle.items() if k in VehicleParams.__dataclass_fields__})
+        self.options = options or NmpcOptions()
+        self.diagnostics: list[Diagnostic] = []
+        self.speed = self.stop = self.light = False
+        self.d_collision: float | None = None
+        for rs in rulesets:
+            for r in rs.rules:
+                f = rs.formula(r.name)
+                reads = {n for n in analysis.signals_read(f) if n not in rs.consts}
+                used = False
+                if "v_max" in reads:
+                    self.speed = used = True
+                if "d_stop" in reads:
+                    self.stop = used = True
+                if reads & {"light_red", "d_light"}:
+                    self.light = used = True
+                for c in _calls(f, "collision_free"):
+                    d = analysis.fold_term(c.args[0]) if len(c.args) == 1 else None
+                    if isinstance(d, ast.Num):
+                        self.d_collision = max(self.d_collision or 0.0, float(d.value))
+                        used = True
+                if not used:
+                    self.diagnostics.append(MIL530(
+                        f"rule '{r.name}' is not a speed limit, stop line, red light or collision_free rule; "
+                        "the NMPC baseline ignores it", r.span or Span(rs.file),
+                        hint="the NMPC expresses v_max, d_stop, light_red/d_light and collision_free(d) only"))
+        st = self.settings
+        o = self.options
+        self.problem = NmpcProblem(model, H=st.H, dt=st.dt, weights=st.weights, bicycle=self.params,
+                                   vehicle=self.vehicle, n_obstacles=o.max_obstacles if self.d_collision is not None else 0,
+                                   substeps=o.substeps, max_iter=o.max_iter, tol=o.tol, max_cpu_time=o.max_cpu_time,
+                                   expand=o.expand, retry_max_iter=o.retry_max_iter)
+        self._prev: tuple[float, NlpSolution] | None = None
+        self._s_hint: float | None = None
+        self.last: NlpSolution | None = None
+
+    @classmethod
+    def from_world(cls, world: World, settings: MPCSettings | None = None, *, model: str = "kinematic",
+                   params: BicycleParams | None = None, options: NmpcOptions | None = None
+                   ) -> tuple["NmpcController | None", list[Diagnostic]]:
+        """The NMPC of a scenario's world with its own rule files and settings."""
+        from twolevel.control.codes import MIL512
+        from twolevel.stl.lint import load_ruleset
+        from twolevel.world.provided import PROVIDED_SIGNALS
+
+        diags: list[Diagnostic] = []
+        sets = []
+        for path, consts in world.rule_files:
+            rs, d = load_ruleset(path, dict(consts), dt=world.settings.dt, provided_signals=PROVIDED_SIGNALS)
+            diags += d
+            if rs is not None:
+                sets.append(rs)
+        if any(d.is_error for d in diags):
+            return None, diags
+        st = settings or MPCSettings(H=world.settings.H, dt=world.settings.dt, time_limit=world.settings.time_limit)
+        if params is None:
+            params = BicycleParams().with_overrides({k: v for k, v in world.ego.vehicle.items()
+                                                     if k in BicycleParams.__dataclass_fields__})
+        try:
+            ctrl = cls(world, sets, st, model=model, params=params, options=options)
+        except ValueError as e:
+            return None, diags + [MIL512(str(e), Span(world.name))]
+        return ctrl, diags + ctrl.diagnostics
+
+    def reset(self) -> None:
+        """Forget the previous solution (the next step starts cold from the reference)."""
+        self._prev = None
+        self._s_hint = None
+
+    # ------------------------------------------------------------------ step data
+    def _prepare(self, ego_state: Sequence[float], t: float, world_state: TrafficState | Snapshot | None,
+                 history: Mapping[str, np.ndarray] | None) -> StepData:
+        st = self.settings
+        traffic, memory = _unpack(world_state)
+        hist = {k: np.asarray(v, float) for k, v in (history or {}).items()}
+        if memory is None and len(self.world.route_stops) and "s" in hist and "v" in hist:
+            memory = StopMemory.fresh(self.world)
+            for s, v in zip(hist["s"], hist["v"]):
+                memory = update_stop_memory(memory, self.world, float(s), float(v), st.dt)
+        u_prev = None
+        if len(hist.get("delta", ())) and len(hist.get("a", ())):
+            u_prev = np.array([hist["delta"][-1], hist["a"][-1]])
+        elif self._prev is not None:
+            u_prev = self.problem.unpack_w(self._prev[1].w)[1][0]
+        return prepare_step(self.world, np.asarray(ego_state, float)[:4], t, traffic, H=st.H, dt=st.dt,
+                            params=self.params, u_prev=u_prev, memory=memory, s_hint=self._s_hint)
+
+    def _x0(self, ego_state: Sequence[float]) -> np.ndarray:
+        e = np.asarray(ego_state, float).ravel()
+        if self.model == "kinematic":
+            return e[:4].copy()
+        if e.size == fw.NX:
+            return e.copy()
+        return fw.initial_state(*(float(c) for c in e[:4]), p=self.vehicle)
+
+    def parameters(self, step: StepData, x0: np.ndarray) -> np.ndarray:
+        """The NLP's parameter vector for this step (see :mod:`twolevel.control.nmpc_nlp`)."""
+        H, dt = self.settings.H, self.settings.dt
+        hc = step.hc
+        route = self.world.route
+        k = np.arange(1, H + 1)
+        vb = np.full(H, 1e3)
+        if self.speed:
+            vb = np.maximum(hc.v_max[1:], float(x0[3]) + self.params.a_min * dt * k + 0.05)
+        # stop lines: the nearest line that applies at step k (inf: none)
+        s_line = np.full(H, np.inf)
+        if self.stop and math.isfinite(hc.s_stop):
+            s_line = np.minimum(s_line, hc.s_stop)
+        if self.light and math.isfinite(hc.s_light):
+            s_line = np.where(hc.light_red[1:] > 0.5, np.minimum(s_line, hc.s_light), s_line)
+        stop = np.tile([0.0, 0.0, 1.0, 0.0], (H, 1))
+        decel = self.options.stop_decel or abs(self.params.a_min)
+        act = np.isfinite(s_line)
+        if act.any():
+            sl = s_line[act]
+            h = route.heading_at(sl)
+            n = np.stack([np.cos(h), np.sin(h)], axis=1)
+            b = np.einsum("ij,ij->i", n, route.position(sl)) - self.options.stop_margin
+            behind = n @ x0[:2] <= b + 1e-9  # a line already passed cannot be kept
+            c = np.where(np.flatnonzero(act) == H - 1, 0.5 / decel, 0.0)  # terminal: can still stop
+            stop[np.flatnonzero(act)[behind]] = np.column_stack([n, b, c])[behind]
+        N = self.problem.N
+        centres = np.tile(x0[:2] + _FAR, (N, H, 1))
+        shapes = np.tile([1.0, 0.0, 1.0, 1.0], (N, 1))
+        m = len(hc.index)
+        if N and m:
+            order = np.argsort(np.hypot(*(hc.xy[:, 0, :] - x0[:2]).T), kind="stable")[:N]
+            q = len(order)
+            d = float(self.d_collision or 0.0)
+            centres[:q] = hc.xy[order, 1:, :]
+            psi = hc.psi[order, 0]
+            A = 0.5 * (hc.length[order] + self.world.ego.length) + d
+            B = 0.5 * (hc.width[order] + self.world.ego.width) + d
+            shapes[:q] = np.column_stack([np.cos(psi), np.sin(psi), 1.0 / A, 1.0 / B])
+        return self.problem.layout.pack(x0, step.u_prev, step.omega, vb, stop, centres, shapes)
+
+    def _initial_guess(self, t: float, step: StepData, x0: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, str]:
+        pr = self.problem
+        H, m, nx = pr.H, pr.m, pr.nx
+        warm = self.options.warm_start
+        if warm and self._prev is not None and abs(t - self._prev[0] - self.settings.dt) < 1e-6:
+            sol = self._prev[1]
+            X, U = pr.unpack_w(sol.w)
+            U = np.vstack([U[1:], U[-1:]])
+            X = np.vstack([X[1:], np.asarray(pr.F(X[-1], U[-1]), float).ravel()[None]])
+            w0 = pr.pack_w(X, U)
+            if warm == "primal":
+                return w0, None, None, "warm-primal"
+            lg = sol.lam_g.reshape(H, m)
+            lg = np.vstack([lg[1:], lg[-1:]]).ravel()
+            lx_x, lx_u = sol.lam_x[: H * nx].reshape(H, nx), sol.lam_x[H * nx:].reshape(H, 2)
+            lx = np.concatenate([np.vstack([lx_x[1:], lx_x[-1:]]).ravel(), np.vstack([lx_u[1:], lx_u[-1:]]).ravel()])
+            return w0, lg, lx, "warm"
+        U = step.us_bar
+        X = pr.roll(x0, U)[1:]
+        return pr.pack_w(X, U), None, None, "cold"
+
+    # ------------------------------------------------------------------ one step
+    def solve(self, ego_state: Sequence[float], t: float, world_state: TrafficState | Snapshot | None = None,
+              history: Mapping[str, np.ndarray] | None = None) -> PlanResult:
+        """One NMPC step (see the module docstring); numerical failures give 'fallback'."""
+        tm: dict[str, float] = {}
+        t0 = time.perf_counter()
+        if not np.all(np.isfinite(np.asarray(ego_state, float))):
+            return self._fail(np.asarray(ego_state, float), t, "non-finite ego state", 0, tm, t0)
+        step = self._prepare(ego_state, t, world_state, history)
+        x0 = self._x0(ego_state)
+        t1 = time.perf_counter()
+        tm["prepare"] = (t1 - t0) * 1e3
+        p = self.parameters(step, x0)
+        w0, lg, lx, how = self._initial_guess(t, step, x0)
+        tm["parameters"] = (time.perf_counter() - t1) * 1e3
+        sol = self.problem.solve(w0, p, lg, lx, retry=self.options.retry)
+        self.last = sol
+        tm["solve"] = sol.solve_ms
+        pr = self.problem
+        name = f"nmpc-{self.model}"
+        retried = len(sol.attempts) > 1
+        tried = " → ".join(sol.attempts) if retried else sol.status
+        msg = f"ipopt: {tried}, {sol.iterations} iterations ({how} start{', L-BFGS retry' if retried else ''})"
+        if sol.success:
+            X, U = pr.unpack_w(sol.w)
+            states = np.vstack([x0[None, :4], X[:, :4]])
+            self._prev = (t, sol)
+            self._s_hint = float(step.s_ref[1])
+            status = "optimal" if sol.status == "Solve_Succeeded" else "feasible"
+            tm["total"] = (time.perf_counter() - t0) * 1e3
+            return PlanResult(status, sol.cost, U, states, np.zeros(0, np.int64), 0, pr.n_g, pr.n_w, sol.iterations,
+                              False, tm, {}, msg, float("nan"), (), name)
+        return self._fail(x0, t, msg, sol.iterations, tm, t0)
+
+    def _fail(self, x0: np.ndarray, t: float, msg: str, iterations: int, tm: dict[str, float], t0: float
+              ) -> PlanResult:
+        """The fallback plan: the previous plan shifted, or full braking (rolled from ``x0``)."""
+        pr = self.problem
+        U, why = self._fallback_controls()
+        X = self._roll_forward(x0, U) if np.all(np.isfinite(x0)) else np.full((pr.H, pr.nx), np.nan)
+        if self._prev is not None:  # keep shifting the last good solution (duals dropped)
+            self._prev = (t, NlpSolution(pr.pack_w(X, U), np.zeros(pr.n_g), np.zeros(pr.n_w), float("nan"),
+                                         "fallback", 0, 0.0, True))
+        tm["total"] = (time.perf_counter() - t0) * 1e3
+        diag = MIL515(f"t = {t:.2f} s: NMPC {msg}; fallback: {why}", Span(self.world.name))
+        return PlanResult("fallback", float("nan"), U, np.vstack([x0[None, :4], X[:, :4]]), np.zeros(0, np.int64), 0,
+                          pr.n_g, pr.n_w, iterations, False, tm, {}, f"{msg}; fallback: {why}", float("nan"),
+                          (diag,), f"nmpc-{self.model}")
+
+    def _roll_forward(self, x0: np.ndarray, U: np.ndarray) -> np.ndarray:
+        """States k = 1..H under U (H, 2), which is edited in place so the kinematic model's
+        speed stops at 0 instead of reversing."""
+        dt = self.settings.dt
+        x = x0
+        out = []
+        for k in range(U.shape[0]):  # H scalar steps, fallback only
+            if self.model == "kinematic":
+                U[k, 1] = max(U[k, 1], -float(x[3]) / dt)
+            x = np.asarray(self.problem.F(x, U[k]), float).ravel()
+            out.append(x)
+        return np.array(out)
+
+    def _fallback_controls(self) -> tuple[np.ndarray, str]:
+        H = self.settings.H
+        if self._prev is not None:
+            U = self.problem.unpack_w(self._prev[1].w)[1]
+            return np.vstack([U[1:], U[-1:]]), "previous plan shifted"
+        return np.tile([0.0, self.params.a_min], (H, 1)), "no previous plan: full braking"
+

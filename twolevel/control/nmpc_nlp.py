@@ -1,0 +1,282 @@
+"""The NMPC baseline's nonlinear program: one parametric casadi NLP per (model, shape), IPOPT.
+
+Decision vector ``w`` = [X_1 … X_H (``nx`` each, k-major), U_0 … U_{H−1} ([δ, a] each)];
+multiple shooting: X_{k+1} = F(X_k, U_k) with X_0 the parameter ``x0``.
+
+Models (``F`` over one control period dt [s], input held):
+
+* ``"kinematic"`` (nx = 4, [X, Y, ψ, v]): the exact zero-order-hold step of
+  :func:`twolevel.models.bicycle.step`, written again in casadi symbols (same equations, the
+  sinc series near 0 done with ``if_else`` as numpy does with ``where``).
+* ``"fourwheel"`` (nx = 12, :mod:`twolevel.models.fourwheel`): the detailed model's own
+  integrator (:func:`~twolevel.models.fourwheel.substep`, through the casadi ops), ``n``
+  internal steps per dt (default the model's ``h_int``, 20 at dt = 0.1 s), a → γ by
+  :func:`~twolevel.models.actuation.gamma_from_accel` at the start of the step as
+  :func:`twolevel.models.rollout.rollout_accel` does. Cost and rules read [X, Y, ψ, vx].
+
+Parameter vector ``p`` (:class:`ParamLayout`): x0 (nx), u_prev (2), ω (H, 4), speed bound (H,),
+stop bound (H, 4) = (n_x, n_y, b, c) for nᵀp_k + c·v_k² ≤ b, obstacle centres (N, H, 2) and shapes
+(N, 4) = (cos ψ_i, sin ψ_i, 1/A_i, 1/B_i).
+
+Constraints ``g``, per step k = 1..H in this order (so duals shift with the plan):
+dynamics (nx, = 0); v_k ≤ vbound_k; nᵀp_k + c_k·v_k² ≤ b_k (behind a stop line
+and able to stop before it: c = 1/(2·deceleration); n = 0, b = 1, c = 0 when no line applies); for each obstacle the order-4 superellipse
+((ξ/A)⁴ + (η/B)⁴ + ε)^¼ ≥ 1 in the obstacle's frame (ξ along its heading), which contains the
+Minkowski sum of the two boxes grown by the distance d, scales like a distance, and is smooth.
+
+Cost (the paper's, as :mod:`twolevel.control.problem`): Σ_k w_u‖u_k‖² + w_du‖u_k − u_{k−1}‖²
++ Σ_{k=1..H} Σ_i w_i (ζ_{k,i} − ω_{k,i})².
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from twolevel.control.problem import Weights
+from twolevel.models import fourwheel as fw
+from twolevel.models.actuation import gamma_from_accel
+from twolevel.models.ops import casadi_ops
+from twolevel.models.params import BicycleParams, VehicleParams
+
+__all__ = ["MODELS", "ParamLayout", "NlpSolution", "NmpcProblem", "bicycle_step_casadi"]
+
+MODELS = ("kinematic", "fourwheel")
+_EPS_SUPER = 1e-8  # keeps the ¼ power smooth at the obstacle's centre
+SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+
+
+def bicycle_step_casadi(x: Any, u: Any, dt: float, l_f: float) -> Any:
+    """:func:`twolevel.models.bicycle.step` in casadi symbols: x (4,), u (2,) → x⁺ (4,)."""
+    import casadi as ca
+
+    kappa = ca.tan(u[0]) / l_f
+    s = x[3] * dt + 0.5 * u[1] * dt * dt
+    theta = 0.5 * kappa * s
+    small = ca.fabs(theta) < 1e-4
+    th = ca.if_else(small, 1.0, theta)
+    sinc = ca.if_else(small, 1.0 - theta**2 / 6.0, ca.sin(th) / th)
+    g = s * sinc
+    phi = x[2] + theta
+    return ca.vertcat(x[0] + g * ca.cos(phi), x[1] + g * ca.sin(phi), x[2] + 2.0 * theta, x[3] + u[1] * dt)
+
+
+def _fourwheel_step_casadi(x: Any, u: Any, dt: float, p: VehicleParams, n: int) -> Any:
+    import casadi as ca
+
+    ops = casadi_ops()
+    gamma = gamma_from_accel(u[1], x[3], p, ops)
+    cols = [x[i] for i in range(fw.NX)]
+    h = dt / n
+    for _ in range(n):
+        cols = fw.substep(cols, u[0], gamma, h, p, ops)
+    return ca.vertcat(*cols)
+
+
+@dataclass(frozen=True)
+class ParamLayout:
+    """Offsets of the parameter blocks in ``p`` (see the module docstring)."""
+
+    nx: int
+    H: int
+    N: int
+
+    @property
+    def size(self) -> int:
+        return self.nx + 2 + 4 * self.H + self.H + 4 * self.H + 2 * self.N * self.H + 4 * self.N
+
+    def pack(self, x0: np.ndarray, u_prev: np.ndarray, omega: np.ndarray, vbound: np.ndarray, stop: np.ndarray,
+             centres: np.ndarray, shapes: np.ndarray) -> np.ndarray:
+        """One parameter vector from its blocks (shapes as in the module docstring)."""
+        return np.concatenate([np.ravel(x0), np.ravel(u_prev), np.ravel(omega), np.ravel(vbound), np.ravel(stop),
+                               np.ravel(centres), np.ravel(shapes)]).astype(float)
+
+
+@dataclass(frozen=True, eq=False)
+class NlpSolution:
+    """IPOPT's answer: primal ``w``, duals ``lam_g``/``lam_x``, objective, IPOPT status, iterations,
+    solver wall time [ms], whether it counts as solved, and the status of each attempt (exact
+    Hessian, then L-BFGS)."""
+
+    w: np.ndarray
+    lam_g: np.ndarray
+    lam_x: np.ndarray
+    cost: float
+    status: str
+    iterations: int
+    solve_ms: float
+    success: bool
+    attempts: tuple[str, ...] = ()
+
+
+class NmpcProblem:
+    """The NLP for one model and shape (H, N obstacles), built once; :meth:`solve` per step."""
+
+    def __init__(self, model: str, *, H: int, dt: float, weights: Weights, bicycle: BicycleParams,
+                 vehicle: VehicleParams, n_obstacles: int, substeps: int | None = None, max_iter: int = 30,
+                 tol: float = 1e-6, max_cpu_time: float | None = None, expand: bool | None = None,
+                 retry_max_iter: int = 100) -> None:
+        import casadi as ca
+
+        if model not in MODELS:
+            raise ValueError(f"unknown NMPC model {model!r}; choose one of {', '.join(MODELS)}")
+        self.model, self.H, self.dt, self.N = model, H, dt, n_obstacles
+        self.nx = 4 if model == "kinematic" else fw.NX
+        self.substeps = 1 if model == "kinematic" else (substeps or fw.substeps_per_step(dt, vehicle))
+        nx, N = self.nx, n_obstacles
+        self.layout = ParamLayout(nx, H, N)
+        self.n_w = H * nx + 2 * H
+        self.m = nx + 2 + N  # constraints per step
+
+        xs = ca.SX.sym("x", nx)
+        us = ca.SX.sym("u", 2)
+        if model == "kinematic":
+            nxt = bicycle_step_casadi(xs, us, dt, bicycle.l_f)
+        else:
+            nxt = _fourwheel_step_casadi(xs, us, dt, vehicle, self.substeps)
+        self.F = ca.Function("shoot", [xs, us], [nxt])
+        self._roll = self.F.mapaccum("roll", H)
+
+        L = self.layout
+        P = ca.MX.sym("p", L.size)
+        o = 0
+
+        def take(n: int) -> Any:
+            nonlocal o
+            blk = P[o:o + n]
+            o += n
+            return blk
+
+        x0, u_prev = take(nx), take(2)
+        omega = ca.reshape(take(4 * H), 4, H)  # column k = ω_{k+1}
+        vb = take(H)
+        stop = ca.reshape(take(4 * H), 4, H)
+        cen = take(2 * N * H)  # (N, H, 2) row-major
+        shp = ca.reshape(take(4 * N), 4, N)
+
+        W = ca.MX.sym("w", self.n_w)
+        X = ca.reshape(W[: H * nx], nx, H)
+        U = ca.reshape(W[H * nx:], 2, H)
+        w_track = ca.DM(np.asarray(weights.track, float))
+        J = 0
+        g = []
+        # the shooting function is called, not inlined: keeps the four-wheel graph small
+        Xn = self.F.map(H)(ca.horzcat(x0, X[:, :-1]), U)
+        for k in range(H):
+            uk = U[:, k]
+            du = uk - (u_prev if k == 0 else U[:, k - 1])
+            zeta = ca.vertcat(X[0, k], X[1, k], X[2, k], X[3, k])
+            e = zeta - omega[:, k]
+            J += weights.u * ca.sumsqr(uk) + weights.du * ca.sumsqr(du) + ca.dot(w_track, e * e)
+            gk = [Xn[:, k] - X[:, k], vb[k] - X[3, k], stop[2, k] - stop[0, k] * X[0, k] - stop[1, k] * X[1, k] - stop[3, k] * X[3, k] ** 2]
+            for i in range(N):
+                base = 2 * (i * H + k)
+                dx, dy = X[0, k] - cen[base], X[1, k] - cen[base + 1]
+                c, s, ia, ib = shp[0, i], shp[1, i], shp[2, i], shp[3, i]
+                xi = (c * dx + s * dy) * ia
+                eta = (-s * dx + c * dy) * ib
+                gk.append((xi**4 + eta**4 + _EPS_SUPER) ** 0.25 - 1.0)
+            g.append(ca.vertcat(*gk))
+        G = ca.vertcat(*g)
+        self._nlp = {"x": W, "p": P, "f": J, "g": G}
+        self._opts_base: dict[str, Any] = {
+            "print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes", "ipopt.max_iter": max_iter,
+            "expand": (model == "kinematic") if expand is None else expand, "ipopt.tol": tol, "ipopt.acceptable_tol": max(tol * 100, 1e-4), "ipopt.acceptable_iter": 5,
+        }
+        if max_cpu_time is not None:
+            self._opts_base["ipopt.max_cpu_time"] = max_cpu_time
+        self.retry_max_iter = retry_max_iter
+        self._solvers: dict[tuple[bool, bool], Any] = {}
+
+        # bounds
+        lo_x = np.full((H, nx), -np.inf)
+        hi_x = np.full((H, nx), np.inf)
+        if model == "kinematic":
+            lo_x[:, 3], hi_x[:, 3] = 0.0, bicycle.v_max
+        else:
+            lo_x[:, 3] = -0.5
+        lo_u = np.tile([-bicycle.delta_max, bicycle.a_min], (H, 1))
+        hi_u = np.tile([bicycle.delta_max, bicycle.a_max], (H, 1))
+        self.lbx = np.concatenate([lo_x.ravel(), lo_u.ravel()])
+        self.ubx = np.concatenate([hi_x.ravel(), hi_u.ravel()])
+        lg = np.zeros((H, self.m))
+        ug = np.full((H, self.m), np.inf)
+        ug[:, :nx] = 0.0
+        self.lbg, self.ubg = lg.ravel(), ug.ravel()
+
+    @property
+    def n_g(self) -> int:
+        return self.H * self.m
+
+    def _solver(self, warm: bool, lbfgs: bool = False) -> Any:
+        s = self._solvers.get((warm, lbfgs))
+        if s is None:
+            import casadi as ca
+
+            opts = dict(self._opts_base)
+            if lbfgs:
+                opts.update({"ipopt.hessian_approximation": "limited-memory", "ipopt.max_iter": self.retry_max_iter})
+            if warm:
+                opts.update({"ipopt.warm_start_init_point": "yes", "ipopt.warm_start_bound_push": 1e-6,
+                             "ipopt.warm_start_mult_bound_push": 1e-6, "ipopt.warm_start_slack_bound_push": 1e-6,
+                             "ipopt.mu_init": 1e-4})
+            s = ca.nlpsol(f"nmpc_{self.model}", "ipopt", self._nlp, opts)
+            self._solvers[(warm, lbfgs)] = s
+        return s
+
+    def roll(self, x0: np.ndarray, U: np.ndarray) -> np.ndarray:
+        """States (H+1, nx) under controls U (H, 2) [δ, a] from x0 (nx,)."""
+        out = np.asarray(self._roll(np.asarray(x0, float), np.asarray(U, float).T)).T
+        return np.vstack([np.asarray(x0, float)[None], out])
+
+    def pack_w(self, X: np.ndarray, U: np.ndarray) -> np.ndarray:
+        """Decision vector from states (H, nx) for k = 1..H and controls (H, 2)."""
+        return np.concatenate([np.ravel(X), np.ravel(U)])
+
+    def unpack_w(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(states (H, nx) for k = 1..H, controls (H, 2)) of a decision vector."""
+        H, nx = self.H, self.nx
+        return w[: H * nx].reshape(H, nx), w[H * nx:].reshape(H, 2)
+
+    def solve(self, w0: np.ndarray, p: np.ndarray, lam_g0: np.ndarray | None = None,
+              lam_x0: np.ndarray | None = None, retry: bool = True) -> NlpSolution:
+        """One IPOPT solve from ``w0``; with duals given, IPOPT's warm-start initialisation is used.
+        With the exact Hessian first; if that fails and ``retry``, again from the same point with
+        the limited-memory (L-BFGS) Hessian, which gets through the saddle-like points the exact
+        Hessian crawls at (a stop line ahead with the tracking cost pulling forward). Iterations
+        and time add up. Numerical failures come back as an unsuccessful :class:`NlpSolution`,
+        never raised."""
+        first = self._attempt(w0, p, lam_g0, lam_x0, False)
+        if first.success or not retry:
+            return first
+        second = self._attempt(w0, p, lam_g0, lam_x0, True)
+        return NlpSolution(second.w, second.lam_g, second.lam_x, second.cost, second.status,
+                           first.iterations + second.iterations, first.solve_ms + second.solve_ms, second.success,
+                           (first.status, second.status))
+
+    def _attempt(self, w0: np.ndarray, p: np.ndarray, lam_g0: np.ndarray | None, lam_x0: np.ndarray | None,
+                 lbfgs: bool) -> NlpSolution:
+        import time
+
+        warm = lam_g0 is not None and lam_x0 is not None
+        args: dict[str, Any] = {"x0": w0, "p": p, "lbx": self.lbx, "ubx": self.ubx, "lbg": self.lbg, "ubg": self.ubg}
+        if warm:
+            args.update({"lam_g0": lam_g0, "lam_x0": lam_x0})
+        t0 = time.perf_counter()
+        try:
+            solver = self._solver(warm, lbfgs)
+            sol = solver(**args)
+            stats = solver.stats()
+        except Exception as exc:  # casadi raises on evaluation errors (NaN/Inf in a function)
+            ms = (time.perf_counter() - t0) * 1e3
+            n = np.full(self.n_w, np.nan)
+            why = f"exception: {type(exc).__name__}: {exc}".splitlines()[0][:200]
+            return NlpSolution(n, np.zeros(self.n_g), np.zeros(self.n_w), float("nan"), why, 0, ms, False, (why,))
+        ms = (time.perf_counter() - t0) * 1e3
+        w = np.asarray(sol["x"], float).ravel()
+        status = str(stats.get("return_status", "unknown"))
+        ok = status in SUCCESS and bool(np.all(np.isfinite(w)))
+        return NlpSolution(w, np.asarray(sol["lam_g"], float).ravel(), np.asarray(sol["lam_x"], float).ravel(),
+                           float(sol["f"]), status, int(stats.get("iter_count", 0)), ms, ok, (status,))
