@@ -37,11 +37,11 @@ def collision_free_builtin(x: str, y: str, others: np.ndarray) -> Builtin:
         d = enc.term(args[0], t)
         if not isinstance(d, float):
             raise EncodeError(MIL501("collision_free(d): d must be known at solve time", _span(node)))
-        ex, ey = enc.signal_at(x, t), enc.signal_at(y, t)
         o = others[:, t]
         ok = np.isfinite(o).all(axis=1)
         if not ok.any():
             return s * INF
+        ex, ey = enc.signal_at(x, t), enc.signal_at(y, t)
         if isinstance(ex, float) and isinstance(ey, float):
             return s * (float(np.min(np.abs(ex - o[ok, 0]) + np.abs(ey - o[ok, 1]))) - d)
         if s > 0 and isinstance(ex, Lin) and isinstance(ey, Lin) and len(ex.idx) == 1 and len(ey.idx) == 1:
@@ -217,15 +217,8 @@ class CollisionBlock(Block):
             starts = np.concatenate([[0], np.cumsum(nk[mp])])
             owner = np.repeat(np.arange(mp.size), nk[mp])
             covers = enc.emit_grouped(owner, bcols, mp.size, extra_col=guard, lo=0.0 if guard >= 0 else 1.0)
-            bl = bcols.tolist()
-            for r, bc in zip(rows.tolist(), bl):
-                enc._rows_of_guard[bc] = [r]
-            st, vh, fl = step[mp].tolist(), veh[mp].tolist(), fi.tolist()
-            for j in range(mp.size):
-                a, b = int(starts[j]), int(starts[j + 1])
-                # sources: (built-in, vehicle, trace step, face (sign of dx, sign of dy)) per disjunct
-                src = tuple(("collision_free", vh[j], st[j], (_FA[f], _FB[f])) for f in fl[a:b])
-                enc.add_disjunction(bl[a:b], int(covers[j]), guard, "", src)
+            # one disjunction per pair: its binaries, each enabling one face row (rows[i])
+            enc.add_disjunctions(bcols, rows, covers, starts, guard)
 
 
 def _merge_tables(blocks: list[Block]) -> CollisionBlock:

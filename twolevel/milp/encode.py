@@ -162,6 +162,7 @@ class Encoder:
         self.T = int(length)
         self._rob: dict[tuple[int, int, float], Tree] = {}
         self._sig: dict[tuple[str, int], Tree] = {}
+        self._dense: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self._bnd: dict[int, tuple[float, float, object]] = {}
         self._refs: dict[int, int] = {}
         self._shared: dict[int, Tree] = {}
@@ -307,6 +308,12 @@ class Encoder:
                 return self.rob(n.operand, k, s) if 0 <= k < self.T else s * INF
             past = op in ("historically", "once")
             w = self._window(t, n.interval, past)
+            if op == "always" and s > 0:
+                from twolevel.milp.affine_block import vector_always
+
+                fast = vector_always(self, n, w)
+                if fast is not None:
+                    return fast
             is_max = op in ("eventually", "once")
             return self._comb(is_max, [self.rob(n.operand, k, s) for k in w], s)
         if isinstance(n, ast.BinTemporal):
@@ -386,6 +393,39 @@ class Encoder:
         self._n += n
         return self._row0 + np.arange(first, first + n)
 
+    def emit_triplets(self, n: int, r: np.ndarray, c: np.ndarray, v: np.ndarray, lo: np.ndarray) -> np.ndarray:
+        """Emit ``n`` rows ``Σ v·x[c] ≥ lo`` from triplets with block-local rows ``r``."""
+        first = self._n
+        self._r.append(np.asarray(r, np.int64) + first)
+        self._c.append(np.asarray(c, np.int64))
+        self._v.append(np.asarray(v, float))
+        self._lo.append(np.asarray(lo, float))
+        self._n += n
+        return self._row0 + np.arange(first, first + n)
+
+    def dense_width(self) -> int | None:
+        """The column count every affine signal is expressed over (None if they differ)."""
+        ws = {s.coef.shape[1] for s in self.signals.values() if isinstance(s, AffineSignal)}
+        return ws.pop() if len(ws) == 1 else (0 if not ws else None)
+
+    def dense_signal(self, name: str, n: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """Signal ``name`` as dense rows over the trace: (C (T, n), offset (T,)), cached."""
+        hit = self._dense.get(name)
+        if hit is not None:
+            return hit
+        s = self.signals.get(name)
+        if s is None:
+            return None
+        if isinstance(s, AffineSignal):
+            C = np.zeros((self.T, n))
+            rows = np.repeat(np.arange(self.T), np.diff(s.coef.indptr))
+            np.add.at(C, (rows, np.asarray(s.coef.indices)), np.asarray(s.coef.data, float))
+            out = (C, np.asarray(s.offset, float))
+        else:
+            out = (np.zeros((self.T, n)), np.broadcast_to(np.asarray(s, float), (self.T,)).astype(float))
+        self._dense[name] = out
+        return out
+
     def emit_grouped(self, owner: np.ndarray, cols: np.ndarray, n_groups: int, *, extra_col: int = -1,
                      lo: float = 1.0) -> np.ndarray:
         """One row per group ``g``: ``Σ_{owner[i] = g} x[cols[i]] (− x[extra_col]) ≥ lo`` (cover rows)."""
@@ -403,6 +443,18 @@ class Encoder:
         self._lo.append(np.full(n_groups, float(lo)))
         self._n += n_groups
         return self._row0 + np.arange(first, first + n_groups)
+
+    def add_disjunctions(self, bins: np.ndarray, rows: np.ndarray, covers: np.ndarray, starts: np.ndarray,
+                         guard: int) -> None:
+        """Record many disjunctions at once: disjunction j has binaries ``bins[starts[j]:starts[j+1]]``,
+        binary i enabling the single row ``rows[i]``, and cover row ``covers[j]`` (vectorised
+        built-ins; label: the current requirement)."""
+        base = len(self.b.disjunctions) + len(self._disj)
+        st = starts.tolist()
+        for j in range(len(st) - 1):
+            a, b = st[j], st[j + 1]
+            self._disj.append(dict(id=base + j, binaries=bins[a:b], cover=int(covers[j]), guard=guard,
+                                   label=self._label, sources=(), rows=tuple(rows[i:i + 1] for i in range(a, b))))
 
     def add_disjunction(self, binaries: list[int], cover: int, guard: int, label: str = "",
                         sources: tuple[object, ...] = ()) -> None:
@@ -536,9 +588,11 @@ class Encoder:
             lo = np.asarray(self._lo, float)
         out = self.b.add_rows(name, self._n, rows, cols, vals, lo, INF)
         for d in self._disj:
+            rws = d.get("rows")
             self.b.add_disjunction(Disjunction(
                 id=d["id"], binaries=np.asarray(d["binaries"], np.int64),
-                rows=tuple(np.asarray(self._rows_of_guard.get(bc, []), np.int64) for bc in d["binaries"]),
+                rows=rws if rws is not None else
+                tuple(np.asarray(self._rows_of_guard.get(bc, []), np.int64) for bc in d["binaries"]),
                 cover_row=d["cover"], guard=d["guard"], label=d["label"], sources=d["sources"]))
         return out
 

@@ -1,0 +1,156 @@
+"""A vectorised fast path of the encoder: ``always[a,b]`` over a conjunction of linear predicates.
+
+``always[0:1] (v <= v_max + tol)`` at one step is the ``min`` over the window of affine
+expressions of the decision variables: one dense row per (predicate, step) over the signals'
+columns, built with array arithmetic instead of one tree leaf per step. :class:`AffineBlock` is a
+:class:`~twolevel.milp.robtree.Block`: rows always true are dropped and rows false by constants
+fail the requirement exactly as the generic path does; under a guard each row gets its big-M
+from the variable bounds. Anything else (other operators, non-linear terms, negation) returns
+``None`` and the generic encoder takes over.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from twolevel.milp.robtree import Block, Tree, lin, mk
+from twolevel.stl import ast
+
+__all__ = ["AffineBlock", "vector_always"]
+
+
+class AffineBlock(Block):
+    """``min_i (C[i] @ x[:n] + off[i])`` over the first ``n = C.shape[1]`` columns."""
+
+    __slots__ = ("C", "off")
+
+    def __init__(self, C: np.ndarray, off: np.ndarray) -> None:
+        self.C, self.off = C, off
+
+    @classmethod
+    def merge(cls, blocks: list[Block]) -> "AffineBlock":
+        n = max(b.C.shape[1] for b in blocks)  # type: ignore[attr-defined]
+        Cs = [np.pad(b.C, ((0, 0), (0, n - b.C.shape[1]))) for b in blocks]  # type: ignore[attr-defined]
+        return cls(np.vstack(Cs), np.concatenate([b.off for b in blocks]))  # type: ignore[attr-defined]
+
+    def _range(self, lb: np.ndarray, ub: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        n = self.C.shape[1]
+        a, b = self.C * lb[None, :n], self.C * ub[None, :n]
+        with np.errstate(invalid="ignore"):
+            lo = np.where(self.C == 0, 0.0, np.minimum(a, b)).sum(axis=1) + self.off
+            hi = np.where(self.C == 0, 0.0, np.maximum(a, b)).sum(axis=1) + self.off
+        return lo, hi
+
+    def bounds(self, lb: np.ndarray, ub: np.ndarray) -> tuple[float, float]:
+        lo, hi = self._range(lb, ub)
+        return float(lo.min()), float(hi.min())
+
+    def expand(self) -> Tree:
+        rows = []
+        for i in range(self.C.shape[0]):
+            nz = np.flatnonzero(self.C[i])
+            rows.append(lin(tuple(int(j) for j in nz), tuple(float(v) for v in self.C[i, nz]), float(self.off[i])))
+        return mk(False, rows)
+
+    def emit(self, enc, margin: float, guard: int) -> None:  # type: ignore[no-untyped-def]
+        lo, hi = self._range(enc.b.lb, enc.b.ub)
+        if np.any(hi < margin):
+            enc._fail(guard)
+        live = (lo < margin) & (hi >= margin)
+        if not live.any():
+            return
+        C = self.C[live]
+        rhs = margin - self.off[live]
+        r, c = np.nonzero(C)
+        vals = C[r, c]
+        if guard >= 0:
+            M = margin - lo[live]
+            k = C.shape[0]
+            r = np.concatenate([r, np.arange(k)])
+            c = np.concatenate([c, np.full(k, guard)])
+            vals = np.concatenate([vals, -M])
+            rhs = rhs - M
+        rows = enc.emit_triplets(C.shape[0], r, c, vals, rhs)
+        if guard >= 0:
+            enc._rows_of_guard.setdefault(guard, []).extend(rows.tolist())
+
+
+def _term(enc, node: ast.Node, steps: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray] | None:  # type: ignore[no-untyped-def]
+    """A term over ``steps``: (C (K, n), off (K,)), or None when not affine with known factors."""
+    K = steps.size
+    if isinstance(node, ast.Num):
+        return np.zeros((K, n)), np.full(K, float(node.value))
+    if isinstance(node, ast.Var):
+        if node.name in enc.consts and node.name not in enc.signals:
+            return np.zeros((K, n)), np.full(K, float(enc.consts[node.name]))
+        dense = enc.dense_signal(node.name, n)
+        if dense is None:
+            return None
+        C, off = dense
+        return C[steps], off[steps]
+    if isinstance(node, ast.Neg):
+        a = _term(enc, node.operand, steps, n)
+        return None if a is None else (-a[0], -a[1])
+    if isinstance(node, ast.Arith):
+        a, b = _term(enc, node.left, steps, n), _term(enc, node.right, steps, n)
+        if a is None or b is None:
+            return None
+        if node.op == "+":
+            return a[0] + b[0], a[1] + b[1]
+        if node.op == "-":
+            return a[0] - b[0], a[1] - b[1]
+        a_const, b_const = not a[0].any(), not b[0].any()
+        if node.op == "*":
+            if a_const:
+                return b[0] * a[1][:, None], b[1] * a[1]
+            if b_const:
+                return a[0] * b[1][:, None], a[1] * b[1]
+            return None
+        if node.op == "/" and b_const and np.all(b[1] != 0):
+            return a[0] / b[1][:, None], a[1] / b[1]
+    return None
+
+
+def _conjuncts(node: ast.Node, out: list[ast.Compare]) -> bool:
+    if isinstance(node, ast.Compare) and node.op in ("<", "<=", ">", ">="):
+        out.append(node)
+        return True
+    if isinstance(node, ast.Binary) and node.op == "and":
+        return _conjuncts(node.left, out) and _conjuncts(node.right, out)
+    return False
+
+
+def vector_always(enc, node: ast.Temporal, steps: range) -> Tree | None:  # type: ignore[no-untyped-def]
+    """The robustness tree of ``always`` over ``steps`` of a conjunction of linear predicates,
+    as an :class:`AffineBlock` (constants folded first); None when the fast path does not apply."""
+    preds: list[ast.Compare] = []
+    if not _conjuncts(node.operand, preds) or len(steps) == 0:
+        return None
+    n = enc.dense_width()
+    if n is None:
+        return None
+    st = np.arange(steps.start, steps.stop)
+    Cs, offs = [], []
+    for p in preds:
+        l, r = _term(enc, p.left, st, n), _term(enc, p.right, st, n)
+        if l is None or r is None:
+            return None
+        if p.op in ("<", "<="):
+            Cs.append(r[0] - l[0]), offs.append(r[1] - l[1])
+        else:
+            Cs.append(l[0] - r[0]), offs.append(l[1] - r[1])
+    C, off = np.vstack(Cs), np.concatenate(offs)
+    if not np.all(np.isfinite(C)):
+        return None
+    const = ~C.any(axis=1)
+    with np.errstate(invalid="ignore"):
+        c_min = float(np.min(off[const])) if const.any() else np.inf
+    if np.isnan(c_min):
+        return None
+    keep = ~const & np.isfinite(off)
+    if np.any(~const & (off == -np.inf)):
+        return -np.inf
+    if not keep.any():
+        return c_min
+    blk = AffineBlock(C[keep], off[keep])
+    return mk(False, [blk, c_min]) if np.isfinite(c_min) else blk
