@@ -134,7 +134,6 @@ def main() -> None:
 
     rows = [("twolevel high level (modes)", hl_res), ("NMPC kinematic (IPOPT)", kin_res),
             ("NMPC four-wheel (IPOPT)", fw_res)]
-    base = _stats(np.array([r.timings_ms["total"] for r in hl_res]))
     print(f"\nper-step controller time [ms] on the same steps (NMPC: prepare + IPOPT; four-wheel: first "
           f"{len(fw_res)} steps)")
     print(f"{'controller':30s} {'steps':>5} {'median':>8} {'p95':>8} {'max':>8} {'med/HL':>7} {'p95/HL':>7} "
@@ -149,7 +148,6 @@ def main() -> None:
         ok = sum(r.ok for r in res)
         print(f"{name:30s} {n:5d} {med:8.2f} {p95:8.2f} {mx:8.1f} {med / hl_sub[0]:7.2f} {p95 / hl_sub[1]:7.2f} "
               f"{1e3 / med:7.1f} {ip:9.2f} {it:9.1f} {ok:5d}")
-    del base
     solve_fw = np.array([r.timings_ms["solve"] for r in fw_res])
     print(f"four-wheel NMPC IPOPT time alone: median {np.median(solve_fw):.0f} ms, max {solve_fw.max():.0f} ms "
           f"→ {1e3 / np.median(solve_fw):.1f} Hz (paper: NMPC on the detailed model below 5 Hz)")

@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from twolevel.control.high_level import MPCSettings, Snapshot
+from twolevel.control.high_level import Snapshot
 from twolevel.control.nmpc import MIL530, NmpcController, NmpcOptions
 from twolevel.control.nmpc_nlp import bicycle_step_casadi
 from twolevel.models import bicycle
