@@ -191,14 +191,157 @@ def monitor(
     raise typer.Exit(EXIT_FAIL if res.violated else EXIT_OK)
 
 
+def _print_diagnostics(diags, sources=None) -> None:  # noqa: ANN001
+    """Findings of plan/simulate go to stderr (stdout carries the result)."""
+    if diags:
+        from twolevel.diagnostics import render
+
+        sys.stderr.write(render("full" if sys.stderr.isatty() else "concise", diags, sources=sources or {}))
+
+
+@app.command()
+def plan(
+    scenario: str = typer.Argument(..., metavar="SCENARIO.yaml", help="A scenario file."),
+    solver: str = typer.Option("highs", "--solver", help="highs (exact L1 MILP + Clarabel polish), modes (real-time mode search), gurobi (if installed)."),
+    at: Optional[float] = typer.Option(None, "--at", metavar="SECONDS", help="Plan from the state recorded at this time of --trace."),
+    trace: Optional[str] = typer.Option(None, "--trace", metavar="RUN_DIR/trace.csv", help="A run's trace to take the state and history from."),
+    emit: Optional[str] = typer.Option(None, "--emit", metavar="MODEL.mps|MODEL.lp", help="Write the MILC model for any other solver."),
+    output: MonitorFormat = typer.Option(MonitorFormat.table, "--format", help="table or json."),
+    time_limit: float = typer.Option(10.0, "--time-limit", min=0.001, metavar="SECONDS", help="Solver time limit."),
+) -> None:
+    """Solve one MPC problem of SCENARIO (at its start, or at --at T of a recorded --trace).
+
+    Exit 0 with a plan, 1 when no plan satisfies the rules (the conflicting rules are named
+    where they can be found), 2 on bad input.
+    """
+    import json
+
+    from twolevel.control.planning import plan_scenario
+
+    report_, diags = plan_scenario(scenario, solver=solver, at=at, trace=trace, emit=emit, time_limit=time_limit)
+    _print_diagnostics(diags)
+    if report_ is None:
+        raise typer.Exit(EXIT_USAGE)
+    if output is MonitorFormat.json:
+        _emit(json.dumps(report_.to_json()) + "\n")
+    else:
+        from rich.markup import escape
+        from rich.table import Table
+
+        head, rows = report_.table()
+        table = Table(title=f"{scenario}: {report_.status}, objective {report_.objective:.6g}", title_justify="left")
+        for h in head:
+            table.add_column(escape(h), justify="right")
+        for row in rows:
+            table.add_row(*row)
+        console = _console()
+        console.print(table)
+        facts = [
+            ("solver", report_.solver),
+            ("binaries / rows / columns", f"{report_.binaries} / {report_.rows} / {report_.columns}"),
+            ("QPs solved", str(report_.qps)),
+            ("certified optimal", "yes" if report_.certified else "no"),
+        ] + [(f"time: {k} [ms]", f"{v:.2f}") for k, v in report_.solve_ms.items()]
+        facts += [(f"rule {name}: robustness", f"{rob:.4g}") for name, rob in report_.rules]
+        if report_.conflicts:
+            facts.append(("conflicting rules", ", ".join(report_.conflicts)))
+        if report_.emitted:
+            facts.append(("model written to", report_.emitted))
+        if report_.message:
+            facts.append(("note", report_.message))
+        console.print(_table("solve", facts))
+    raise typer.Exit(EXIT_OK if report_.status in ("optimal", "feasible") else EXIT_FAIL)
+
+
+def _summary_rows(s) -> list[tuple[str, str]]:  # noqa: ANN001 - RunSummary, imported lazily
+    def f(v: float, unit: str = "", digits: int = 3) -> str:
+        return "-" if v != v else (f"{v:.{digits}g} {unit}".strip() if abs(v) != float("inf") else "inf")
+
+    rows = [
+        ("status", s.status),
+        ("controller", s.controller + ("" if s.monitor else " (no monitor)")),
+        ("simulated time", f(s.duration, "s", 4)),
+        ("steps", str(s.steps)),
+        ("control step median / p95 / max", f"{s.step_ms_median:.2f} / {s.step_ms_p95:.2f} / {s.step_ms_max:.2f} ms"),
+        ("high level median / max", f"{s.high_ms_median:.2f} / {s.high_ms_max:.2f} ms"),
+        ("low level median / max", f"{s.low_ms_median:.2f} / {s.low_ms_max:.2f} ms"),
+        ("control rate", f(s.control_rate_hz, "Hz", 4)),
+        ("steps over 100 ms", str(s.steps_over_budget)),
+        ("simulated / wall time", f(s.realtime, "x", 3)),
+        ("tracking error max / mean", f"{s.tracking_error_max:.3f} / {s.tracking_error_mean:.3f} m"),
+        ("max speed over the limit", f(s.speed_over_limit_max, "m/s")),
+        ("min distance (centres)", f(s.min_distance, "m")),
+        ("min gap (boxes)", f(s.min_gap, "m")),
+        ("collisions", str(len(s.collisions)) + "".join(f"\n  t={c.t:.1f} s with {c.other} at ({c.x:.1f}, {c.y:.1f})" for c in s.collisions)),
+    ]
+    for v in s.violations:
+        rows.append((f"rule {v.rule}", "holds" if v.steps == 0 else f"violated in {v.steps} steps from t={v.first_t:.1f} s (worst {v.worst:.3g})"))
+    rows.append(("decisions", ", ".join(f"{k}: {n}" for k, n in sorted(s.decisions.items()))))
+    return rows
+
+
+@app.command()
+def simulate(
+    scenario: str = typer.Argument(..., metavar="SCENARIO.yaml", help="A scenario file."),
+    out: Optional[str] = typer.Option(None, "--out", "-o", metavar="RUN_DIR", help="Run directory (default: runs/<scenario name>)."),
+    no_monitor: bool = typer.Option(False, "--no-monitor", help="Apply the MPC's controls directly (the paper's 'without monitor')."),
+    controller: str = typer.Option("twolevel", "--controller", help="twolevel (MPC + monitor), or a baseline such as nmpc."),
+    nmpc_model: str = typer.Option("kinematic", "--nmpc-model", help="With --controller nmpc: kinematic or fourwheel."),
+    seed: Optional[int] = typer.Option(None, "--seed", min=0, help="Override the scenario's seed."),
+    duration: Optional[float] = typer.Option(None, "--duration", metavar="SECONDS", help="Override the scenario's duration."),
+    progress: bool = typer.Option(True, "--progress/--no-progress", help="Show a progress bar on a terminal."),
+) -> None:
+    """Run SCENARIO in closed loop (detailed vehicle model as the plant) and write a run
+    directory: trace.csv (one row per step, written as it goes), run.json, frames.jsonl.
+
+    Exit 0 when the run completed without collision or rule violation, 1 when it collided or
+    violated a rule, 2 on bad input or an interrupted/crashed run.
+    """
+    from pathlib import Path
+
+    from twolevel.sim.engine import simulate_scenario
+
+    run_dir = out or str(Path("runs") / Path(scenario).stem)
+    ctrl = controller if controller != "nmpc" or nmpc_model == "kinematic" else f"nmpc-{nmpc_model}"
+    show = progress and sys.stderr.isatty()
+    if show:
+        from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+        bar = Progress(
+            TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.fields[info]}"), TimeRemainingColumn(),
+            console=_console(stderr=True), transient=True,
+        )
+        task = bar.add_task(Path(scenario).stem, total=None, info="")
+
+        def on_step(info) -> None:  # noqa: ANN001
+            bar.update(task, total=info.steps, completed=info.step,
+                       info=f"t={info.t:5.1f}/{info.duration:.0f} s  {info.rate_hz:6.1f} Hz  near={info.n_near:2d}  {info.decision}")
+
+        with bar:
+            summary, diags = simulate_scenario(scenario, run_dir, monitor=not no_monitor, controller=ctrl, seed=seed,
+                                               duration=duration, progress=on_step)
+    else:
+        summary, diags = simulate_scenario(scenario, run_dir, monitor=not no_monitor, controller=ctrl, seed=seed, duration=duration)
+    _print_diagnostics(diags)
+    if summary is None:
+        raise typer.Exit(EXIT_USAGE)
+    _console().print(_table(f"{scenario} → {summary.run_dir}", _summary_rows(summary)))
+    _console().print(f"trace: {Path(summary.run_dir) / 'trace.csv'}   report: twolevel report {summary.run_dir}", markup=False)
+    if summary.status != "complete":
+        raise typer.Exit(EXIT_USAGE)
+    bad = summary.collisions or any(v.steps for v in summary.violations)
+    raise typer.Exit(EXIT_FAIL if bad else EXIT_OK)
+
+
 def _table(title: str, rows: list[tuple[str, str]]):  # noqa: ANN202 - rich is imported lazily
+    from rich.markup import escape
     from rich.table import Table
 
-    table = Table(title=title, show_header=False, title_justify="left")
+    table = Table(title=escape(title), show_header=False, title_justify="left")
     table.add_column("metric", style="bold")
     table.add_column("value", justify="right")
     for label, value in rows:
-        table.add_row(label, value)
+        table.add_row(escape(label), escape(value))
     return table
 
 
