@@ -12,8 +12,11 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[dev]'
 	touch $(STAMP)
 
+# The main job: lint everything, simulate the paper's traffic-rules scenario, report it.
 run: $(STAMP)
-	$(BIN)/twolevel check rules/
+	$(BIN)/twolevel check rules/ maps/ scenarios/ --dt 0.1 --horizon 10
+	status=0; $(BIN)/twolevel simulate scenarios/traffic_rules.yaml --out runs/traffic_rules || status=$$?; \
+	$(BIN)/twolevel report runs/traffic_rules && exit $$status
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
