@@ -37,8 +37,9 @@ run: {{duration: 5, seed: 3}}
     return w, rs
 
 
-def _decide(w, rs, v: float, u: np.ndarray, *, samples: int = 200, step: int = 0):
-    ll = LowLevelController.from_rulesets(w, [rs], settings=LowLevelSettings(samples=samples, seed=7))
+def _decide(w, rs, v: float, u: np.ndarray, *, samples: int = 200, step: int = 0, least: bool = True):
+    ll = LowLevelController.from_rulesets(w, [rs], settings=LowLevelSettings(samples=samples, seed=7,
+                                                                             least_violation=least))
     x0 = fw.initial_state(w.ego.x, w.ego.y, w.ego.psi, v)
     return ll.decide(x0, u, 0.0, w.traffic0, Memory.fresh(w), 20.0, None, step=step)
 
@@ -75,10 +76,28 @@ def test_impossible_situation_brakes(tmp_path: Path) -> None:
     # a stopped car 8 m ahead (centres) at 15 m/s: no control can keep the boxes 1 m apart
     rules = "input float min_gap\nsafe = always[0:1] collision_free(1.0);\n"
     w, rs = _world(tmp_path, rules, "{id: stalled, behaviour: stationary, start: {lane: middle, s: 28}}")
-    d = _decide(w, rs, 15.0, np.tile([0.0, -2.0], (10, 1)), samples=40)
+    d = _decide(w, rs, 15.0, np.tile([0.0, -2.0], (10, 1)), samples=40, least=False)
     assert d.decision == "brake" and d.candidates == 40
     assert d.control[1] == -1.0 and d.accel < -8.0
     assert d.robustness["safe"] < 0  # recorded honestly: braking does not save it either
+
+
+def test_a_standing_car_that_braking_cannot_help_takes_the_least_violating_choice(tmp_path: Path) -> None:
+    # stopped half across the lane marking while the next lane's traffic closes in from behind:
+    # braking keeps it there; moving back towards its lane violates less
+    rules = "input float min_gap\nsafe = always[0:1] collision_free(1.0);\n"
+    w, rs = _world(tmp_path, rules, "{id: passing, behaviour: constant_velocity, start: {lane: left, s: 14}, speed: 14}")
+    ll = LowLevelController.from_rulesets(w, [rs], settings=LowLevelSettings(samples=40, seed=7))
+    x0 = fw.initial_state(w.ego.x, w.ego.y + 1.5, 0.15, 0.0)
+    u = np.tile([-0.4, 2.0], (10, 1))
+    d = ll.decide(x0, u, 0.0, w.traffic0, Memory.fresh(w), 20.0, None)
+    plain = LowLevelController.from_rulesets(w, [rs], settings=LowLevelSettings(samples=40, seed=7, least_violation=False))
+    b = plain.decide(x0, u, 0.0, w.traffic0, Memory.fresh(w), 20.0, None)
+    assert b.decision == "brake" and b.robustness["safe"] < 0
+    assert d.decision == "least_violation" and d.robustness["safe"] > b.robustness["safe"]
+    # at speed the paper's full brake stands even with least_violation on
+    w2, rs2 = _world(tmp_path, rules, "{id: stalled, behaviour: stationary, start: {lane: middle, s: 28}}")
+    assert _decide(w2, rs2, 15.0, np.tile([0.0, -2.0], (10, 1)), samples=40).decision == "brake"
 
 
 def test_current_sample_is_not_judged(tmp_path: Path) -> None:

@@ -55,6 +55,7 @@ rules:
   - {RULES / 'stop_sign.stl'}
   - {RULES / 'red_light.stl'}
   - {RULES / 'safe_distance.stl'}
+controller: {{time_limit: 30}}  # no wall-clock cut-off in the MPC: the same plan on any machine load
 run: {{duration: {duration}, seed: 4}}
 """)
     return path
@@ -186,3 +187,28 @@ def test_bad_requests_are_diagnostics(tmp_path: Path) -> None:
     assert simulate_scenario(path, str(tmp_path / "x"), duration=-1.0)[1][0].code == "SIM611"
     s, d = simulate_scenario(str(tmp_path / "missing.yaml"), str(tmp_path / "x"))
     assert s is None and any(x.is_error for x in d)
+
+
+@pytest.mark.slow
+def test_trace_signals_equal_the_world_definitions(urban_run) -> None:
+    """The engine's incremental sensing gives what world/signals.py's signals_along gives on
+    the recorded trajectory (traffic replayed with the same ego boxes)."""
+    from twolevel.world import traffic as tr
+    from twolevel.world.loader import load_scenario
+    from twolevel.world.signals import TrafficLog, signals_along
+    from twolevel.world.world import build_world
+
+    tmp, _ = urban_run
+    scn, _ = load_scenario(str(tmp / "stops.yaml"))
+    w = build_world(scn)
+    c = read_run(tmp / "run").columns
+    states, state = [], w.traffic0
+    for k in range(len(c["t"])):
+        states.append(state)
+        ego = tr.EgoBox(c["x"][k], c["y"][k], c["psi"][k], c["v"][k], w.ego.length)
+        state = tr.step(state, w.settings.dt, lanes=w.lanes, parts=w.parts, limits=w.limits, lights=w.lights,
+                        stops=w.stops, ego=ego, stop_speed=w.settings.stop_speed)
+    ref = signals_along(w, TrafficLog.of(states, w.parts.length, w.parts.width),
+                        {k: c[k] for k in ("x", "y", "psi", "v")})
+    for name in ("s", "e", "v_max", "d_stop", "light_red", "d_light", "d_lead", "v_lead", "min_gap", "n_near"):
+        np.testing.assert_allclose(c[name], ref[name], rtol=0, atol=1e-6, err_msg=name)

@@ -11,7 +11,13 @@ Each step, given the MPC's optimal controls u* = [δ, a] over the horizon:
    the batched offline monitor (:mod:`twolevel.control.batch_monitor`);
 3. if every rule holds, apply u*_0 (decision ``mpc``); otherwise sample candidates in the ball of
    radius r around u* (decision ``sampled``: the best-cost candidate that satisfies every rule);
-   if none of the sampling budget does, brake fully (decision ``brake``).
+   if none of the sampling budget does, brake fully (decision ``brake``) — unless the car is
+   (almost) standing (|v| < 1 m/s) and braking is worse: then, when the braking rollout's worst
+   rule robustness is below that of u* or of a sampled candidate, that least-violating choice
+   is applied (decision ``least_violation``). Braking a standing car cannot cure a violation
+   the others cause (traffic passing within D_safe of a car stopped half across a lane
+   marking); braking forever there is a deadlock, not safety. At speed the paper's full brake
+   stands: it sheds the most energy.
 
 **What "holds" means over a finite predicted window.** The trace a rule is judged on is the
 recorded history (the last P samples the rule's past operators can reach, P = its past depth
@@ -61,6 +67,9 @@ from twolevel.world.world import World
 
 __all__ = ["LowLevelSettings", "Decision", "LowLevelController", "RuleCheck", "MAX_PAST"]
 
+STANDING = 1.0
+"""Below this speed [m/s] braking changes little, so a least-violating choice may replace it."""
+
 MAX_PAST = 3000
 """Past samples kept for a rule with an unbounded past operator (``once`` without a bound)."""
 
@@ -70,7 +79,9 @@ class LowLevelSettings:
     """``r``: radius of the sampling ball in (δ/δ_max, γ) [-]; ``samples``: the sampling budget
     [candidates per step]; ``rounds``: candidates per round (the last is repeated until the
     budget is spent); ``seed``: the run's seed; ``delta_max`` [rad]: steering limit;
-    ``backend``: rollout backend (:mod:`twolevel.models.rollout`)."""
+    ``backend``: rollout backend (:mod:`twolevel.models.rollout`); ``least_violation``: when
+    nothing satisfies, do not brake if braking violates the rules worse than u* or a sampled
+    candidate (see the module docstring); False is the paper's plain rule."""
 
     r: float = 0.3
     samples: int = 200
@@ -78,6 +89,7 @@ class LowLevelSettings:
     seed: int = 0
     delta_max: float = 0.5
     backend: Backend = "auto"
+    least_violation: bool = True
 
     def round_sizes(self) -> list[int]:
         """Candidates per round, summing to ``samples``."""
@@ -107,7 +119,7 @@ class RuleCheck:
 class Decision:
     """The low level's answer for one step.
 
-    ``decision``: ``mpc`` (u* holds), ``sampled`` or ``brake``; ``control`` = [δ rad, γ] applied
+    ``decision``: ``mpc`` (u* holds), ``sampled``, ``brake`` or ``least_violation``; ``control`` = [δ rad, γ] applied
     now; ``accel`` [m/s²]: the acceleration that γ commands at the current speed (quasi-static);
     ``candidates``: sampled candidates evaluated (0 when u* held); ``robustness``: each rule's
     robustness at t + dt for the applied choice (for ``brake``: the braking rollout's);
@@ -260,6 +272,10 @@ class LowLevelController:
         target = ro.states[0][:, [0, 1, 2, 3]] if target is None else np.asarray(target, dtype=float)
         rng = np.random.default_rng((st.seed, step))
         tried = 0
+        best: tuple[float, np.ndarray, float, dict[str, float], np.ndarray] | None = None
+        if rob:
+            best = (min(mpc_rob.values()), np.array([u_star[0, 0], gamma_star[0]]), float(u_star[0, 1]), mpc_rob,
+                    ro.states[0])
         base = np.stack([u_star[:, 0] / st.delta_max, gamma_star], axis=1)  # (H, 2) normalised
         for k in st.round_sizes():
             radius = st.r * np.sqrt(rng.random(k))
@@ -275,6 +291,12 @@ class LowLevelController:
             rob = judge(rc.states, accel, cand[..., 0])
             tried += k
             ok = np.all(np.stack([v >= 0 for v in rob.values()]), axis=0) if rob else np.ones(k, dtype=bool)
+            if rob and not ok.any():
+                worst = np.min(np.stack(list(rob.values())), axis=0)
+                j = int(np.argmax(worst))
+                if best is None or worst[j] > best[0]:
+                    a0 = float(accel_from_gamma(cand[j, 0, 1], max(float(x0[3]), 0.0), p))
+                    best = (float(worst[j]), cand[j, 0].copy(), a0, {n: float(v[j]) for n, v in rob.items()}, rc.states[j])
             if ok.any():
                 cost = np.where(ok, self._cost(rc.states, target, offset), np.inf)
                 j = int(np.argmin(cost))
@@ -289,8 +311,11 @@ class LowLevelController:
         accel = self._accel(brake[None, :, 1], rb.states)
         rob = judge(rb.states, accel, brake[None, :, 0])
         a0 = float(accel_from_gamma(-1.0, max(float(x0[3]), 0.0), p))
-        return self._done("brake", brake[0].copy(), a0, tried, {n: float(v[0]) for n, v in rob.items()},
-                          mpc_rob, rb.states[0], tm, t_start)
+        brake_rob = {n: float(v[0]) for n, v in rob.items()}
+        standing = abs(v_now) < STANDING
+        if st.least_violation and standing and best is not None and brake_rob and best[0] > min(brake_rob.values()) + 1e-9:
+            return self._done("least_violation", best[1], best[2], tried, best[3], mpc_rob, best[4], tm, t_start)
+        return self._done("brake", brake[0].copy(), a0, tried, brake_rob, mpc_rob, rb.states[0], tm, t_start)
 
     def _done(self, decision: str, control: np.ndarray, accel: float, tried: int, rob: dict[str, float],
               mpc_rob: dict[str, float], states: np.ndarray, tm: dict[str, float], t_start: float) -> Decision:

@@ -15,7 +15,7 @@ import numpy as np
 __all__ = ["StepInfo", "Collision", "Closest", "RuleViolations", "RunSummary", "summarise"]
 
 #: Which controller level each decision belongs to (as the report counts them).
-LEVEL = {"mpc": "high", "fallback": "high", "sampled": "low", "brake": "low", "nmpc": "nmpc"}
+LEVEL = {"mpc": "high", "fallback": "high", "sampled": "low", "brake": "low", "least_violation": "low", "nmpc": "nmpc"}
 
 
 @dataclass(frozen=True)
