@@ -123,13 +123,12 @@ def main() -> None:
           f"{fwc.problem.n_w} variables, {fwc.problem.n_g} constraints, built in {build_fw:.1f} s "
           f"(expand={bool(a.expand)})")
 
-    # warm-up (first IPOPT call loads the solver; the high level builds its pattern)
+    # warm-up: two steps build the cold- and the warm-start IPOPT instances (built lazily)
     inputs, hl_res, hl_xs = closed_loop(hl, world, a.steps)
-    kin.solve(*inputs[0])
-    kin.reset()
+    for c in (kin, fwc):
+        replay(c, inputs[:2])
+        c.reset()
     kin_res = replay(kin, inputs)
-    fwc.solve(*inputs[0])
-    fwc.reset()
     fw_res = replay(fwc, inputs[: a.fourwheel_steps])
 
     rows = [("twolevel high level (modes)", hl_res), ("NMPC kinematic (IPOPT)", kin_res),
