@@ -15,15 +15,16 @@ from numpy.typing import ArrayLike, NDArray
 __all__ = ["box_corners", "box_separation"]
 
 
-def box_corners(X: ArrayLike, Y: ArrayLike, psi: ArrayLike, length: float, width: float) -> NDArray[np.float64]:
-    """Corners (..., 4, 2) [m] of boxes length × width [m] centred at (X, Y) [m], heading ψ [rad].
+def box_corners(X: ArrayLike, Y: ArrayLike, psi: ArrayLike, length: ArrayLike, width: ArrayLike) -> NDArray[np.float64]:
+    """Corners (..., 4, 2) [m] of boxes length × width [m] centred at (X, Y) [m], heading ψ [rad];
+    every argument broadcasts (one size for all boxes, or one per box).
 
     Counter-clockwise from the rear right: rear-right, front-right, front-left, rear-left.
     """
-    X, Y, psi = np.broadcast_arrays(np.asarray(X, float), np.asarray(Y, float), np.asarray(psi, float))
+    X, Y, psi, length, width = np.broadcast_arrays(*(np.asarray(a, float) for a in (X, Y, psi, length, width)))
     c, s = np.cos(psi)[..., None], np.sin(psi)[..., None]
-    lx = 0.5 * length * np.array([-1.0, 1.0, 1.0, -1.0])
-    ly = 0.5 * width * np.array([-1.0, -1.0, 1.0, 1.0])
+    lx = 0.5 * length[..., None] * np.array([-1.0, 1.0, 1.0, -1.0])
+    ly = 0.5 * width[..., None] * np.array([-1.0, -1.0, 1.0, 1.0])
     return np.stack([X[..., None] + c * lx - s * ly, Y[..., None] + s * lx + c * ly], axis=-1)
 
 

@@ -378,43 +378,21 @@ def resample(line: Polyline, spacing: float) -> tuple[np.ndarray, np.ndarray, np
 
 
 def box_corners(center: np.ndarray, psi: np.ndarray, length: np.ndarray, width: np.ndarray) -> np.ndarray:
-    """Corners (..., 4, 2) [m] of oriented boxes, counter-clockwise from front-left."""
-    c, s = np.cos(psi), np.sin(psi)
-    hl, hw = np.asarray(length) / 2, np.asarray(width) / 2
-    fx, fy = c * hl, s * hl  # half-length along the heading
-    lx, ly = -s * hw, c * hw  # half-width to the left
-    sx = np.array([1, -1, -1, 1])
-    sy = np.array([1, 1, -1, -1])
-    x = np.asarray(center)[..., 0, None] + sx * fx[..., None] + sy * lx[..., None]
-    y = np.asarray(center)[..., 1, None] + sx * fy[..., None] + sy * ly[..., None]
-    return np.stack([x, y], axis=-1)
+    """Corners (..., 4, 2) [m] of oriented boxes centred at ``center`` (..., 2) [m]; see
+    :func:`twolevel.models.obb.box_corners` (the one implementation)."""
+    from twolevel.models.obb import box_corners as corners
+
+    center = np.asarray(center, float)
+    return corners(center[..., 0], center[..., 1], psi, length, width)
 
 
 def box_separation(
     c1: np.ndarray, psi1: np.ndarray, l1: np.ndarray, w1: np.ndarray,
     c2: np.ndarray, psi2: np.ndarray, l2: np.ndarray, w2: np.ndarray,
 ) -> np.ndarray:
-    """Signed separation [m] of oriented boxes, vectorised (broadcasting): the Euclidean distance
-    between them when apart, minus the smallest SAT penetration depth when they overlap."""
-    a = box_corners(c1, np.asarray(psi1, float), l1, w1)
-    b = box_corners(c2, np.asarray(psi2, float), l2, w2)
-    a, b = np.broadcast_arrays(a, b)
+    """Signed separation [m] of oriented boxes given by centre, heading and size, vectorised
+    (broadcasting): the distance between them when apart, minus the penetration depth when they
+    overlap — :func:`twolevel.models.obb.box_separation`, the low level's ``collision_free``."""
+    from twolevel.models.obb import box_separation as separation
 
-    def point_edges(p: np.ndarray, q: np.ndarray) -> np.ndarray:  # points of p to edges of q
-        e0 = q
-        e1 = np.roll(q, -1, axis=-2)
-        d = e1 - e0  # (..., 4, 2)
-        rel = p[..., :, None, :] - e0[..., None, :, :]  # (..., 4p, 4e, 2)
-        t = np.clip((rel * d[..., None, :, :]).sum(-1) / (d * d).sum(-1)[..., None, :], 0, 1)
-        diff = rel - t[..., None] * d[..., None, :, :]
-        return np.sqrt((diff * diff).sum(-1)).min(axis=(-1, -2))
-
-    dist = np.minimum(point_edges(a, b), point_edges(b, a))
-    # SAT on the 4 face normals
-    axes = np.concatenate([a[..., [0, 1], :] - a[..., [3, 0], :], b[..., [0, 1], :] - b[..., [3, 0], :]], axis=-2)
-    axes = axes / np.linalg.norm(axes, axis=-1, keepdims=True)
-    pa = np.einsum("...ij,...kj->...ik", axes, a)  # (..., 4 axes, 4 corners)
-    pb = np.einsum("...ij,...kj->...ik", axes, b)
-    overlap = np.minimum(pa.max(-1), pb.max(-1)) - np.maximum(pa.min(-1), pb.min(-1))
-    depth = overlap.min(-1)
-    return np.where(depth > 0, -depth, dist)
+    return separation(box_corners(c1, psi1, l1, w1), box_corners(c2, psi2, l2, w2))
