@@ -60,3 +60,15 @@ def test_simulate_bad_input_exits_2(tmp_path: Path) -> None:
     assert res.exit_code == 2 and "SIM610" in res.stderr
     res = runner.invoke(app, ["simulate", SCENARIO, "--out", str(tmp_path / "r"), "--duration", "-1", "--no-progress"])
     assert res.exit_code == 2
+
+
+@pytest.mark.parametrize("model", ["kinematic", "fourwheel"])
+def test_simulate_with_the_nmpc_baseline(tmp_path: Path, model: str) -> None:
+    run_dir = tmp_path / model
+    args = ["simulate", str(ROOT / "scenarios" / "comparison.yaml"), "--out", str(run_dir), "--controller", "nmpc",
+            "--nmpc-model", model, "--no-monitor", "--duration", "0.5", "--no-progress"]
+    res = runner.invoke(app, args)
+    assert res.exit_code == 0, res.output
+    meta = json.loads((run_dir / "run.json").read_text())
+    assert meta["settings"]["controller"] == ("nmpc" if model == "kinematic" else "nmpc-fourwheel")
+    assert set(meta["summary"]["decisions"]) == {"nmpc"}

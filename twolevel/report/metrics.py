@@ -26,15 +26,16 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from twolevel.sim.summary import LEVEL as _LEVEL
 from twolevel.sim.trace import RunData
 
 #: The paper's collision line: centre-to-centre distance [m] below one vehicle length (4.22 m).
 COLLISION_LINE_M = 4.22
 #: The paper's real-time requirement: one control step within 100 ms (10 Hz).
 STEP_BUDGET_MS = 100.0
-DECISIONS: tuple[str, ...] = ("mpc", "sampled", "brake", "fallback", "nmpc")
-#: Which part of the controller chose the applied control, per decision.
-DECISION_LEVEL: Mapping[str, str] = {"mpc": "high", "fallback": "high", "sampled": "low", "brake": "low", "nmpc": "nmpc"}
+DECISIONS: tuple[str, ...] = ("mpc", "sampled", "least_violation", "brake", "fallback", "nmpc")
+#: Which part of the controller chose the applied control, per decision (one table: the simulator's).
+DECISION_LEVEL: Mapping[str, str] = _LEVEL
 LEVELS: tuple[str, ...] = ("high", "low", "nmpc")
 LIGHT_STATES: tuple[str, ...] = ("none", "green", "yellow", "red")
 RULE_PREFIX = "rob_"

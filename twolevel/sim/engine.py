@@ -62,7 +62,9 @@ TIMING_COLUMNS = ("t_high_ms", "t_low_ms", "t_step_ms", "t_plant_ms")
 #: Signal columns beyond the base ones, named as the rules read them.
 SIGNAL_COLUMNS = ("a", "s", "e", "d_stop", "light_red", "d_light", "d_lead", "v_lead")
 EXTRA_COLUMNS = ("candidates", "ll_violated", "hl_status", "hl_qps", "t_plant_ms")
-CONTROLLERS = ("twolevel",)
+#: The high level: the paper's MILC MPC ("twolevel") or the NMPC baseline on the kinematic or
+#: the four-wheel model (design.md, "Report": the paper's comparison).
+CONTROLLERS = ("twolevel", "nmpc", "nmpc-fourwheel")
 _SIGNALS = ("x", "y", "psi", "v", "a", "delta", "s", "e", "v_max", "d_stop", "light_red", "d_light", "d_lead",
             "v_lead", "min_gap", "n_near")
 _LIGHT_NAMES = {0: "green", 1: "yellow", 2: "red"}
@@ -167,19 +169,18 @@ class _Loop:
     def create(cls, world: Any, scn: Any, *, monitor: bool, controller: str) -> tuple["_Loop | None", list[Diagnostic]]:
         from twolevel.control.high_level import HighLevelController
         from twolevel.control.low_level import LowLevelController
-        from twolevel.stl.lint import load_ruleset
-        from twolevel.world.provided import PROVIDED_SIGNALS
+        from twolevel.world.world import load_rulesets
 
-        diags: list[Diagnostic] = []
-        sets = []
-        for path, consts in world.rule_files:
-            rs, d = load_ruleset(path, dict(consts), dt=world.settings.dt, provided_signals=PROVIDED_SIGNALS)
-            diags += d
-            if rs is not None:
-                sets.append(rs)
+        sets, diags = load_rulesets(world)
         if any(d.is_error for d in diags):
             return None, diags
-        hl, d = HighLevelController.from_world(world)
+        if controller.startswith("nmpc"):
+            from twolevel.control.nmpc import NmpcController
+
+            model = "fourwheel" if controller == "nmpc-fourwheel" else "kinematic"
+            hl, d = NmpcController.from_world(world, model=model)
+        else:
+            hl, d = HighLevelController.from_world(world)
         diags += d
         if hl is None:
             return None, diags
@@ -332,7 +333,8 @@ class _Loop:
             mem_after = memory.after(w, t, s0, v)
             past = history.view()
             c1 = time.perf_counter()
-            plan = self.hl.solve((X, Y, psi, v), t, Snapshot(traffic, mem_after.stops), past)
+            ego = x if self.controller == "nmpc-fourwheel" else (X, Y, psi, v)  # the 4-wheel NMPC wants the full state
+            plan = self.hl.solve(ego, t, Snapshot(traffic, mem_after.stops), past)
             c2 = time.perf_counter()
             u_star = np.asarray(plan.controls, dtype=float)
             if u_star.shape != (H, 2) or not np.all(np.isfinite(u_star)):
@@ -344,7 +346,7 @@ class _Loop:
             else:
                 why = ""
                 control = np.array([u_star[0, 0], float(gamma_from_accel(u_star[0, 1], max(x[3], 0.0), p))])
-                accel, decision, tried = float(u_star[0, 1]), "mpc", 0
+                accel, decision, tried = float(u_star[0, 1]), "nmpc" if self.controller.startswith("nmpc") else "mpc", 0
             if decision == "mpc" and plan.status == "fallback":
                 decision = "fallback"
             c3 = time.perf_counter()

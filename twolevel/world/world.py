@@ -256,3 +256,20 @@ def build_world(scn: Scenario) -> World:
     on_s, on_l = np.flatnonzero(~np.isnan(rs)), np.flatnonzero(~np.isnan(rl))
     return World(spec.name or scn.path, lanes, route, limits, lights, stops, parts, traffic0, ego, settings,
                  tuple((r.path, r.constants) for r in scn.rules), rs[on_s], on_s, rl[on_l], on_l)
+
+
+def load_rulesets(world: World) -> tuple[list, list]:
+    """The checked rule sets of the scenario's rule files, its constant bindings applied and its
+    signals checked against what the world provides: ``(rule sets, diagnostics)``. The one
+    place the controllers and the simulator load a world's rules from."""
+    from twolevel.stl.lint import load_ruleset
+    from twolevel.world.provided import PROVIDED_SIGNALS
+
+    diags: list = []
+    sets: list = []
+    for path, consts in world.rule_files:
+        rs, d = load_ruleset(path, dict(consts), dt=world.settings.dt, provided_signals=PROVIDED_SIGNALS)
+        diags += d
+        if rs is not None:
+            sets.append(rs)
+    return sets, diags
