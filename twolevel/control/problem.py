@@ -189,12 +189,41 @@ class _CostShape:
 _COST_CACHE: dict[tuple, _CostShape] = {}
 
 
+def _widen(cs: _CostShape, n: int) -> _CostShape:
+    """The same cost over ``n`` columns (the extra columns — binaries, auxiliaries — cost nothing)."""
+    m, n0 = cs.F.shape
+    F = sp.csr_matrix((cs.F.data, cs.F.indices, cs.F.indptr), shape=(m, n))
+    P = sp.csc_matrix((cs.P.data, cs.P.indices, np.concatenate([cs.P.indptr, np.full(n - n0, cs.P.indptr[-1])])),
+                      shape=(n, n))
+    FtW = sp.csr_matrix((cs.FtW.data, cs.FtW.indices, np.concatenate([cs.FtW.indptr, np.full(n - n0, cs.FtW.indptr[-1])])),
+                        shape=(n, m))
+    return _CostShape(F, cs.w, P, FtW)
+
+
 def _cost_shape(lay: Layout, w: Weights, n: int) -> _CostShape:
+    """The cost's matrices over ``n`` columns; built once over the state and input columns (which
+    come first) and widened per column count, so a new number of binaries costs no rebuild."""
     H = lay.x.shape[0]
     key = (H, w, n, int(lay.x[0, 0]), int(lay.u[0, 0]))
     hit = _COST_CACHE.get(key)
     if hit is not None:
         return hit
+    n0 = int(max(lay.x.max(), lay.u.max())) + 1
+    base_key = (H, w, n0, int(lay.x[0, 0]), int(lay.u[0, 0]))
+    base = _COST_CACHE.get(base_key)
+    if base is None:
+        base = _base_cost_shape(lay, w, n0)
+        _COST_CACHE[base_key] = base
+    out = base if n == n0 else _widen(base, n)
+    if len(_COST_CACHE) > 64:
+        _COST_CACHE.clear()
+        _COST_CACHE[base_key] = base
+    _COST_CACHE[key] = out
+    return out
+
+
+def _base_cost_shape(lay: Layout, w: Weights, n: int) -> _CostShape:
+    H = lay.x.shape[0]
     nu = 2 * H
     ucols = lay.u.ravel()
     r = np.arange(nu)
@@ -210,11 +239,7 @@ def _cost_shape(lay: Layout, w: Weights, n: int) -> _CostShape:
     Hs = (F.T @ sp.diags(2.0 * wt) @ F).tocsc()
     P = sp.triu(Hs).tocsc()
     P.sum_duplicates()
-    out = _CostShape(F, wt, P, (F.T @ sp.diags(wt)).tocsr())
-    if len(_COST_CACHE) > 32:
-        _COST_CACHE.clear()
-    _COST_CACHE[key] = out
-    return out
+    return _CostShape(F, wt, P, (F.T @ sp.diags(wt)).tocsr())
 
 
 def _cost(model: MilpModel, step: StepData, lay: Layout, w: Weights) -> None:

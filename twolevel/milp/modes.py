@@ -89,12 +89,9 @@ class ModeSearch:
         self.row_flat = np.concatenate(rows).astype(np.int64) if rows else np.zeros(0, np.int64)
         self.row_g = np.repeat(np.arange(G), self.row_cnt)
         A = m.A
-        pos = np.empty(self.row_flat.size, np.int64)
-        for j, (r, g) in enumerate(zip(self.row_flat, self.row_g)):
-            c = self.bin_col[g]
-            a, b = A.indptr[c], A.indptr[c + 1]
-            pos[j] = a + int(np.searchsorted(A.indices[a:b], r))
-        self.guard_pos = pos
+        # CSC entries sorted by (column, row): one search over column·m + row keys
+        keys = np.repeat(np.arange(A.shape[1], dtype=np.int64), np.diff(A.indptr)) * A.shape[0] + A.indices
+        self.guard_pos = np.searchsorted(keys, self.bin_col[self.row_g] * A.shape[0] + self.row_flat)
         self.cont_mask = ~m.integrality
         self._memo: dict[bytes, tuple[float, np.ndarray | None, np.ndarray | None]] = {}
         self.qps = 0
