@@ -48,6 +48,7 @@ import numpy as np
 from twolevel.control.codes import MIL510, MIL511, MIL512
 from twolevel.control.horizon import StepData, history_length, prepare_step
 from twolevel.control.problem import Assembled, Weights, assemble, shape_key
+from twolevel.control.template import TemplateCache, refresh, template_of
 from twolevel.diagnostics import Diagnostic, Span
 from twolevel.milp.encode import Requirement
 from twolevel.milp.model import PatternCache
@@ -73,7 +74,9 @@ class MPCSettings:
     """Horizon ``H`` [steps], period ``dt`` [s], cost ``weights``, ``solver``, ``time_limit`` per
     step [s] (None: no limit — the mode search's B&B runs to completion), certificate ``gap``
     (relative), satisfaction margin ``eps``, whether to evaluate ``rule_robustness``, and whether
-    to re-linearise (about the reference, then about braking) when the step is infeasible."""
+    to re-linearise (about the reference, then about braking) when the step is infeasible;
+    ``refresh`` (``modes`` solver): reuse a model of the same structure with new values (:mod:`twolevel.control.template`),
+    keeping vehicle–step pairs within d + ``pad`` [m] so the structure lasts several steps."""
 
     H: int = 10
     dt: float = 0.1
@@ -84,6 +87,8 @@ class MPCSettings:
     eps: float = 1e-4
     monitor: bool = True
     relinearise: bool = True
+    refresh: bool = True
+    pad: float = 2.0
 
 
 @dataclass(frozen=True)
@@ -167,6 +172,7 @@ class HighLevelController:
                 steps = int(round(depth / dt)) if math.isfinite(depth) else 10 ** 6
                 self.rules.append(_Rule(r.name, f, reads, steps))
         self._pattern_cache = PatternCache(capacity=16)
+        self.templates = TemplateCache(capacity=4)
         self._qps: OrderedDict[tuple, tuple[FixedModeQP, ModeSearch]] = OrderedDict()
         self._prev: tuple[float, np.ndarray, np.ndarray, np.ndarray] | None = None  # t, states, controls, mode
         self._s_hint: float | None = None
@@ -237,12 +243,36 @@ class HighLevelController:
     def build(self, step: StepData, past: Mapping[str, np.ndarray], P: int,
               drop: frozenset[str] = frozenset()) -> Assembled:
         """The step's model with every rule not in ``drop``."""
+        st = self.settings
         names = set().union(*(r.reads for r in self.rules if r.name not in drop)) if self.rules else set()
-        return assemble(step, self.requirements(drop, P), H=self.settings.H, dt=self.settings.dt,
-                        params=self.params, weights=self.settings.weights, past=past, P=P, names=names,
-                        cache=self._pattern_cache, eps=self.settings.eps)
+        reqs = self.requirements(drop, P)
+        key = (P, tuple(r.name for r in reqs))
+        use = st.refresh and st.solver == "modes"  # the exact HiGHS path keeps the minimal encoding
+        if use:
+            for tpl in self.templates.candidates(key):
+                asm = refresh(tpl, step, reqs, past, names=names, dt=st.dt, eps=st.eps, weights=st.weights,
+                              params=self.params, pad=st.pad)
+                if asm is not None:
+                    self.templates.touch(key, tpl)
+                    self.templates.hits += 1
+                    asm.template = tpl
+                    return asm
+            self.templates.misses += 1
+        asm = assemble(step, reqs, H=st.H, dt=st.dt, params=self.params, weights=st.weights, past=past, P=P,
+                       names=names, cache=self._pattern_cache, eps=st.eps, stable=use, pad=st.pad)
+        tpl = template_of(asm, st.eps) if use else None
+        if tpl is not None:
+            self.templates.add(key, tpl)
+            asm.template = tpl
+        return asm
 
     def _backend(self, asm: Assembled) -> tuple[FixedModeQP, ModeSearch]:
+        tpl = asm.template
+        if tpl is not None:
+            if tpl.backend is None:  # type: ignore[attr-defined]
+                qp = FixedModeQP(asm.model)
+                tpl.backend = (qp, ModeSearch(qp))  # type: ignore[attr-defined]
+            return tpl.backend  # type: ignore[attr-defined,return-value]
         key = shape_key(asm.model)
         hit = self._qps.get(key)
         if hit is not None:

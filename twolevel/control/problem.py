@@ -33,7 +33,8 @@ from twolevel.milp.model import MilpModel, PatternCache, Residuals
 from twolevel.models.params import BicycleParams
 from twolevel.control.horizon import StepData
 
-__all__ = ["Weights", "Layout", "Assembled", "assemble", "trace_signals", "shape_key"]
+__all__ = ["Weights", "Layout", "Assembled", "assemble", "trace_signals", "shape_key", "dynamics_values",
+           "others_of", "set_cost"]
 
 
 @dataclass(frozen=True)
@@ -65,6 +66,7 @@ class Assembled:
     encoding: Encoding
     signals: dict[str, object]
     diagnostics: list[Diagnostic] = field(default_factory=list)
+    template: object = None  # the refreshable template this model belongs to, if any
 
 
 class RowMatrix:
@@ -151,6 +153,14 @@ def trace_signals(step: StepData, lay: Layout, n: int, past: Mapping[str, np.nda
         elif name == "n_near":
             out[name] = np.concatenate([hist(name, float(len(hc.index)))[:-1], np.full(H + 1, float(len(hc.index)))])
     return out
+
+
+def dynamics_values(step: StepData) -> tuple[np.ndarray, np.ndarray]:
+    """The ``dyn`` block's triplet values (in :func:`_dynamics`' order) and right-hand side."""
+    H = step.A.shape[0]
+    rhs = step.c.copy()
+    rhs[0] += step.A[0] @ step.x0
+    return np.concatenate([np.ones(4 * H), -step.A[1:].ravel(), -step.B.ravel()]), rhs.ravel()
 
 
 def _dynamics(b: ModelBuilder, step: StepData, lay: Layout) -> None:
@@ -242,6 +252,15 @@ def _base_cost_shape(lay: Layout, w: Weights, n: int) -> _CostShape:
     return _CostShape(F, wt, P, (F.T @ sp.diags(wt)).tocsr())
 
 
+def others_of(step: StepData, P: int) -> np.ndarray:
+    """Other vehicles' predicted positions over the trace (n, P+1+H, 2), NaN before now [m]."""
+    hc = step.hc
+    H = step.A.shape[0]
+    others = np.full((len(hc.index), P + 1 + H, 2), np.nan)
+    others[:, P:, :] = hc.xy
+    return others
+
+
 def _cost(model: MilpModel, step: StepData, lay: Layout, w: Weights) -> None:
     """Put the paper's cost into ``model`` (P shared between models of the same shape)."""
     H = lay.x.shape[0]
@@ -256,12 +275,22 @@ def _cost(model: MilpModel, step: StepData, lay: Layout, w: Weights) -> None:
     model.residuals = Residuals(cs.F, g, cs.w)
 
 
+def set_cost(model: MilpModel, step: StepData, lay: Layout, w: Weights) -> None:
+    """Replace the cost of ``model`` (built by :func:`assemble`) by this step's, in place."""
+    model.q = np.zeros(model.n_cols)
+    model.c0 = 0.0
+    _cost(model, step, lay, w)
+
+
 def assemble(
     step: StepData, requirements: Sequence[Requirement], *, H: int, dt: float, params: BicycleParams,
     weights: Weights, past: Mapping[str, np.ndarray], P: int, names: set[str],
-    cache: PatternCache | None = None, eps: float = 1e-4,
+    cache: PatternCache | None = None, eps: float = 1e-4, stable: bool = False, pad: float = 0.0,
+    keep: np.ndarray | None = None,
 ) -> Assembled:
-    """Build the step's model (dynamics, cost, every requirement's MILCs)."""
+    """Build the step's model (dynamics, cost, every requirement's MILCs). ``stable``: the
+    encoder's stable mode (a structure that :mod:`twolevel.control.template` can refresh), with
+    vehicle–step pairs kept within d + ``pad`` [m] (or the pair codes ``keep``)."""
     b = ModelBuilder()
     xb = b.add_vars("x", 4 * H, step.lo.ravel(), step.hi.ravel())
     ub = b.add_vars("u", 2 * H, np.tile([-params.delta_max, params.a_min], H),
@@ -271,10 +300,9 @@ def assemble(
     sigs = trace_signals(step, lay, b.n_cols, past, names | {"x", "y"})
     hc = step.hc
     T = P + 1 + H
-    others = np.full((len(hc.index), T, 2), np.nan)
-    others[:, P:, :] = hc.xy
-    enc = encode(b, requirements, sigs, dt, eps=eps, length=T,
-                 builtins={"collision_free": collision_free_builtin("x", "y", others)})
+    others = others_of(step, P)
+    cf = collision_free_builtin("x", "y", others, ids=np.asarray(hc.index, np.int64), pad=pad, keep=keep)
+    enc = encode(b, requirements, sigs, dt, eps=eps, length=T, builtins={"collision_free": cf}, stable=stable)
     model = b.build(cache)
     _cost(model, step, lay, weights)
     return Assembled(model, lay, enc, sigs, list(enc.diagnostics))

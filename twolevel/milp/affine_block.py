@@ -20,18 +20,21 @@ __all__ = ["AffineBlock", "vector_always"]
 
 
 class AffineBlock(Block):
-    """``min_i (C[i] @ x[:n] + off[i])`` over the first ``n = C.shape[1]`` columns."""
+    """``min_i (C[i] @ x[:n] + off[i])`` over the first ``n = C.shape[1]`` columns; ``S`` (same
+    shape, bool) is the structural pattern (an entry may be structurally present and zero now)."""
 
-    __slots__ = ("C", "off")
+    __slots__ = ("C", "off", "S")
 
-    def __init__(self, C: np.ndarray, off: np.ndarray) -> None:
+    def __init__(self, C: np.ndarray, off: np.ndarray, S: np.ndarray | None = None) -> None:
         self.C, self.off = C, off
+        self.S = C != 0 if S is None else S
 
     @classmethod
     def merge(cls, blocks: list[Block]) -> "AffineBlock":
         n = max(b.C.shape[1] for b in blocks)  # type: ignore[attr-defined]
         Cs = [np.pad(b.C, ((0, 0), (0, n - b.C.shape[1]))) for b in blocks]  # type: ignore[attr-defined]
-        return cls(np.vstack(Cs), np.concatenate([b.off for b in blocks]))  # type: ignore[attr-defined]
+        Ss = [np.pad(b.S, ((0, 0), (0, n - b.S.shape[1]))) for b in blocks]  # type: ignore[attr-defined]
+        return cls(np.vstack(Cs), np.concatenate([b.off for b in blocks]), np.vstack(Ss))  # type: ignore[attr-defined]
 
     def _range(self, lb: np.ndarray, ub: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         n = self.C.shape[1]
@@ -52,7 +55,31 @@ class AffineBlock(Block):
             rows.append(lin(tuple(int(j) for j in nz), tuple(float(v) for v in self.C[i, nz]), float(self.off[i])))
         return mk(False, rows)
 
+    def layout(self, lb: np.ndarray, ub: np.ndarray, margin: float
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+        """Stable emission at top level: every row kept (redundant ones too), entries from the
+        structural pattern. (r, c, vals, lo) of the rows ``C x ≥ margin − off``; None when a row
+        can never hold."""
+        lo, hi = self._range(lb, ub)
+        if np.any(hi < margin):
+            return None
+        r, c = np.nonzero(self.S)
+        return r, c, self.C[r, c], margin - self.off
+
     def emit(self, enc, margin: float, guard: int) -> None:  # type: ignore[no-untyped-def]
+        if enc.stable and guard < 0:
+            from twolevel.milp.encode import Emission
+
+            out = self.layout(enc.b.lb, enc.b.ub, margin)
+            if out is None:
+                enc._fail(guard)
+                return
+            r, c, vals, rhs = out
+            t0, r0 = enc.n_triplets(), enc._n
+            enc.emit_triplets(self.C.shape[0], r, c, vals, rhs)
+            enc.emissions.append(Emission("affine", slice(t0, t0 + r.size), slice(r0, enc._n),
+                                          np.zeros(0, np.int64), (self.S,)))
+            return
         lo, hi = self._range(enc.b.lb, enc.b.ub)
         if np.any(hi < margin):
             enc._fail(guard)
@@ -75,39 +102,57 @@ class AffineBlock(Block):
             enc._rows_of_guard.setdefault(guard, []).extend(rows.tolist())
 
 
-def _term(enc, node: ast.Node, steps: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray] | None:  # type: ignore[no-untyped-def]
-    """A term over ``steps``: (C (K, n), off (K,)), or None when not affine with known factors."""
+def _pattern(enc, name: str, n: int) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """The structural pattern (T, n) of signal ``name``'s coefficients (cached on the encoder)."""
+    key = "\0S" + name
+    hit = enc._dense.get(key)
+    if hit is None:
+        s = enc.signals.get(name)
+        S = np.zeros((enc.T, n), bool)
+        if hasattr(s, "coef"):
+            rows = np.repeat(np.arange(enc.T), np.diff(s.coef.indptr))
+            S[rows, np.asarray(s.coef.indices)] = True
+        hit = enc._dense[key] = (S, None)
+    return hit[0]
+
+
+Term = tuple[np.ndarray, np.ndarray, np.ndarray]
+
+
+def _term(enc, node: ast.Node, steps: np.ndarray, n: int) -> Term | None:  # type: ignore[no-untyped-def]
+    """A term over ``steps``: (C (K, n), off (K,), structural pattern S (K, n)), or None when
+    not affine with known factors."""
     K = steps.size
     if isinstance(node, ast.Num):
-        return np.zeros((K, n)), np.full(K, float(node.value))
+        return np.zeros((K, n)), np.full(K, float(node.value)), np.zeros((K, n), bool)
     if isinstance(node, ast.Var):
         if node.name in enc.consts and node.name not in enc.signals:
-            return np.zeros((K, n)), np.full(K, float(enc.consts[node.name]))
+            return np.zeros((K, n)), np.full(K, float(enc.consts[node.name])), np.zeros((K, n), bool)
         dense = enc.dense_signal(node.name, n)
         if dense is None:
             return None
         C, off = dense
-        return C[steps], off[steps]
+        return C[steps], off[steps], _pattern(enc, node.name, n)[steps]
     if isinstance(node, ast.Neg):
         a = _term(enc, node.operand, steps, n)
-        return None if a is None else (-a[0], -a[1])
+        return None if a is None else (-a[0], -a[1], a[2])
     if isinstance(node, ast.Arith):
         a, b = _term(enc, node.left, steps, n), _term(enc, node.right, steps, n)
         if a is None or b is None:
             return None
         if node.op == "+":
-            return a[0] + b[0], a[1] + b[1]
+            return a[0] + b[0], a[1] + b[1], a[2] | b[2]
         if node.op == "-":
-            return a[0] - b[0], a[1] - b[1]
-        a_const, b_const = not a[0].any(), not b[0].any()
+            return a[0] - b[0], a[1] - b[1], a[2] | b[2]
+        a_const, b_const = not a[2].any(), not b[2].any()
         if node.op == "*":
             if a_const:
-                return b[0] * a[1][:, None], b[1] * a[1]
+                return b[0] * a[1][:, None], b[1] * a[1], b[2] & (a[1] != 0)[:, None]
             if b_const:
-                return a[0] * b[1][:, None], a[1] * b[1]
+                return a[0] * b[1][:, None], a[1] * b[1], a[2] & (b[1] != 0)[:, None]
             return None
         if node.op == "/" and b_const and np.all(b[1] != 0):
-            return a[0] / b[1][:, None], a[1] / b[1]
+            return a[0] / b[1][:, None], a[1] / b[1], a[2]
     return None
 
 
@@ -130,7 +175,7 @@ def vector_always(enc, node: ast.Temporal, steps: range) -> Tree | None:  # type
     if n is None:
         return None
     st = np.arange(steps.start, steps.stop)
-    Cs, offs = [], []
+    Cs, offs, Ss = [], [], []
     for p in preds:
         l, r = _term(enc, p.left, st, n), _term(enc, p.right, st, n)
         if l is None or r is None:
@@ -139,10 +184,12 @@ def vector_always(enc, node: ast.Temporal, steps: range) -> Tree | None:  # type
             Cs.append(r[0] - l[0]), offs.append(r[1] - l[1])
         else:
             Cs.append(l[0] - r[0]), offs.append(l[1] - r[1])
-    C, off = np.vstack(Cs), np.concatenate(offs)
+        Ss.append(l[2] | r[2])
+    C, off, S = np.vstack(Cs), np.concatenate(offs), np.vstack(Ss)
     if not np.all(np.isfinite(C)):
         return None
-    const = ~C.any(axis=1)
+    # stable: a row is constant only when it has no structural entry (not when its values are 0)
+    const = ~S.any(axis=1) if enc.stable else ~C.any(axis=1)
     with np.errstate(invalid="ignore"):
         c_min = float(np.min(off[const])) if const.any() else np.inf
     if np.isnan(c_min):
@@ -152,5 +199,5 @@ def vector_always(enc, node: ast.Temporal, steps: range) -> Tree | None:  # type
         return -np.inf
     if not keep.any():
         return c_min
-    blk = AffineBlock(C[keep], off[keep])
+    blk = AffineBlock(C[keep], off[keep], S[keep] if enc.stable else None)
     return mk(False, [blk, c_min]) if np.isfinite(c_min) else blk

@@ -19,14 +19,24 @@ from twolevel.stl import ast
 __all__ = ["collision_free_builtin", "reachable_box", "CollisionBlock"]
 
 
-def collision_free_builtin(x: str, y: str, others: np.ndarray) -> Builtin:
+def collision_free_builtin(x: str, y: str, others: np.ndarray, *, ids: np.ndarray | None = None,
+                           pad: float = 0.0, keep: np.ndarray | None = None) -> Builtin:
     """``collision_free(d)`` at the high level: ``|x − x_i| + |y − y_i| ≥ d`` for every other
     vehicle i — robustness ``min_i max_faces(σ₁(x − x_i) + σ₂(y − y_i)) − d``.
 
     ``others`` has shape (N, T, 2): each vehicle's predicted position per trace step [m] (NaN
     where absent). Pairs that cannot come within reach and faces that can never hold are
-    removed by the encoder's interval pruning, exactly, given the ego's position bounds."""
+    removed by the encoder's interval pruning, exactly, given the ego's position bounds.
+
+    Stable encoding (``Encoder.stable``): each kept pair is a disjunction of all four faces
+    (faces that can never hold have their binary's upper bound set to 0), and the kept pairs are
+    those that can come within ``d + pad`` [m] (``pad`` ≥ 0: a margin so that the same structure
+    serves the next steps), or, when ``keep`` is given, the pairs whose code is in ``keep`` plus
+    every pair that can come within d. A pair's code is ``step·2³² + ids[i]`` (``ids``: a stable
+    identity per vehicle, default its row); pairs are emitted in code order."""
     others = np.asarray(others, dtype=float)
+    vid = np.arange(others.shape[0], dtype=np.int64) if ids is None else np.asarray(ids, np.int64)
+    opts = (float(pad), None if keep is None else np.asarray(keep, np.int64))
     faces = ((1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0))
     tables: dict[int, tuple[Encoder, _PairTable]] = {}
 
@@ -37,6 +47,10 @@ def collision_free_builtin(x: str, y: str, others: np.ndarray) -> Builtin:
         d = enc.term(args[0], t)
         if not isinstance(d, float):
             raise EncodeError(MIL501("collision_free(d): d must be known at solve time", _span(node)))
+        tb = tables.get(id(enc))
+        if s > 0 and tb is not None and tb[0] is enc and tb[1].ok_t[t]:  # fast: the pair table knows step t
+            idx = np.arange(tb[1].start[t], tb[1].start[t + 1])
+            return CollisionBlock(tb[1], idx, np.full(idx.size, d)) if idx.size else INF
         o = others[:, t]
         ok = np.isfinite(o).all(axis=1)
         if not ok.any():
@@ -47,7 +61,7 @@ def collision_free_builtin(x: str, y: str, others: np.ndarray) -> Builtin:
         if s > 0 and isinstance(ex, Lin) and isinstance(ey, Lin) and len(ex.idx) == 1 and len(ey.idx) == 1:
             tb = tables.get(id(enc))
             if tb is None or tb[0] is not enc:
-                tb = (enc, _PairTable.of(enc, x, y, others))
+                tb = (enc, _PairTable.of(enc, x, y, others, vid, opts))
                 tables.clear()
                 tables[id(enc)] = tb
             idx = tb[1].at(t)
@@ -86,11 +100,13 @@ class _PairTable:
     arrays sorted by step: ego ``xa·x[xc]``, offset ``xo`` = ego offset − vehicle position (same
     for y); ``step``, ``veh``; ``start[t]:start[t+1]`` are the pairs of step t."""
 
-    __slots__ = ("xc", "xa", "xo", "yc", "ya", "yo", "step", "veh", "start", "ok_t")
+    __slots__ = ("xc", "xa", "xo", "yc", "ya", "yo", "step", "veh", "start", "ok_t", "code", "opts")
 
     @classmethod
-    def of(cls, enc: Encoder, x: str, y: str, others: np.ndarray) -> "_PairTable":
+    def of(cls, enc: Encoder, x: str, y: str, others: np.ndarray, ids: np.ndarray | None = None,
+           opts: tuple = (0.0, None)) -> "_PairTable":
         tb = cls()
+        tb.opts = opts
         sx, sy = enc.signals.get(x), enc.signals.get(y)
         T = enc.T
         if not (hasattr(sx, "coef") and hasattr(sy, "coef")):
@@ -108,6 +124,7 @@ class _PairTable:
         tb.xo = sx.offset[t_idx] - others[v_idx, t_idx, 0]  # type: ignore[union-attr]
         tb.yo = sy.offset[t_idx] - others[v_idx, t_idx, 1]  # type: ignore[union-attr]
         tb.step, tb.veh = t_idx, v_idx
+        tb.code = t_idx.astype(np.int64) * (1 << 32) + (v_idx if ids is None else ids[v_idx])
         tb.start = np.searchsorted(t_idx, np.arange(T + 1))
         return tb
 
@@ -168,8 +185,53 @@ class CollisionBlock(Block):
                                    for a, b in zip(_FA, _FB)]))
         return mk(False, pairs)
 
+    def stable_layout(self, lb: np.ndarray, ub: np.ndarray, margin: float, keep: np.ndarray | None = None
+                      ) -> "StableLayout | None":
+        """The stable encoding of ``self ≥ margin`` at top level (see :func:`collision_free_builtin`);
+        ``keep``: the codes to emit (besides every pair that can come within d); default the
+        table's own. None when a pair can never be kept clear (no face can hold) or when the
+        block has no unique pair codes (then the plain emission applies)."""
+        code = getattr(self.tb, "code", None)
+        if code is None:
+            return None
+        codes = code[self.idx]
+        if np.unique(codes).size != codes.size:
+            return None
+        pad, keep0 = self.tb.opts
+        keep = keep0 if keep is None else keep
+        xc, xa, xo, yc, ya, yo, _, _ = self._arr()
+        xlo, xhi, ylo, yhi = self._ranges(lb, ub)
+        d = self.d[:, None]
+        f_hi = np.where(_FA > 0, xhi[:, None], -xlo[:, None]) + np.where(_FB > 0, yhi[:, None], -ylo[:, None]) - d
+        f_lo = np.where(_FA > 0, xlo[:, None], -xhi[:, None]) + np.where(_FB > 0, ylo[:, None], -yhi[:, None]) - d
+        pair_lo = (np.maximum(np.maximum(xlo, -xhi), 0.0) + np.maximum(np.maximum(ylo, -yhi), 0.0) - self.d)
+        live = pair_lo < margin
+        possible = f_hi >= margin
+        if np.any(live & ~possible.any(axis=1)):
+            return StableLayout(None, 0, 0, (), np.zeros(0), np.zeros(0), np.zeros(0), failed=True)
+        padded = pair_lo < margin + pad
+        sel = live | (padded if keep is None else np.isin(codes, keep))
+        p = np.flatnonzero(sel)
+        p = p[np.argsort(codes[p], kind="stable")]
+        M = np.maximum(margin - f_lo[p], 0.0)
+        cst = _FA[None] * xo[p, None] + _FB[None] * yo[p, None] - d[p] - margin
+        n = p.size
+        cols = (np.repeat(xc[p], 4), np.repeat(yc[p], 4))
+        vals = np.stack([(_FA[None] * xa[p, None]).ravel(), (_FB[None] * ya[p, None]).ravel(), -M.ravel()], 1)
+        lo = np.concatenate([(-cst - M).ravel(), np.ones(n)])
+        tvals = np.concatenate([vals.ravel(), np.ones(4 * n)])
+        return StableLayout(codes[p], n, int(padded.sum()), cols, tvals, lo, possible[p].ravel().astype(float))
+
     def emit(self, enc: Encoder, margin: float, guard: int) -> None:
         """Rows for ``self ≥ margin`` (whenever ``x[guard] = 1``), vectorised."""
+        if enc.stable and guard < 0:
+            lay = self.stable_layout(enc.b.lb, enc.b.ub, margin)
+            if lay is not None and lay.failed:
+                enc._fail(guard)
+                return
+            if lay is not None:
+                self._emit_stable(enc, lay)
+                return
         xc, xa, xo, yc, ya, yo, step, veh = self._arr()
         xlo, xhi, ylo, yhi = self._ranges(enc.b.lb, enc.b.ub)
         d = self.d[:, None]
@@ -219,6 +281,37 @@ class CollisionBlock(Block):
             covers = enc.emit_grouped(owner, bcols, mp.size, extra_col=guard, lo=0.0 if guard >= 0 else 1.0)
             # one disjunction per pair: its binaries, each enabling one face row (rows[i])
             enc.add_disjunctions(bcols, rows, covers, starts, guard)
+
+
+    @staticmethod
+    def _emit_stable(enc: Encoder, lay: "StableLayout") -> None:
+        from twolevel.milp.encode import Emission
+
+        n, nb = lay.n, 4 * lay.n  # n = 0 still records an (empty) emission: the structure
+        blk = enc.b.add_vars("cf", nb, 0.0, 1.0, integer=True)
+        enc.n_bin += nb
+        bcols = np.arange(blk.start, blk.stop)
+        enc.b.tighten(bcols, 0.0, lay.bin_ub)
+        t0, r0 = enc.n_triplets(), enc._n
+        v = lay.tvals[: 3 * nb].reshape(nb, 3)
+        rows = enc.emit_rows(np.stack([lay.cols[0], lay.cols[1], bcols], 1), v, lay.lo[:nb])
+        covers = enc.emit_grouped(np.repeat(np.arange(n), 4), bcols, n, lo=1.0)
+        enc.add_disjunctions(bcols, rows, covers, np.arange(0, nb + 1, 4), -1)
+        enc.emissions.append(Emission("collision", slice(t0, enc.n_triplets()), slice(r0, enc._n), bcols,
+                                      (lay.codes,)))
+
+
+class StableLayout:
+    """The values of a stable collision emission: pair ``codes`` (n,), the ego columns of each
+    face row, every triplet value in emission order (face rows x, y, binary; then the cover
+    rows' ones), every row's lower bound (face rows, then covers), each binary's upper bound;
+    ``n_padded``: how many pairs can come within d + pad now."""
+
+    __slots__ = ("codes", "n", "n_padded", "cols", "tvals", "lo", "bin_ub", "failed")
+
+    def __init__(self, codes, n, n_padded, cols, tvals, lo, bin_ub, failed=False):  # type: ignore[no-untyped-def]
+        self.codes, self.n, self.n_padded, self.cols = codes, n, n_padded, cols
+        self.tvals, self.lo, self.bin_ub, self.failed = tvals, lo, bin_ub, failed
 
 
 def _merge_tables(blocks: list[Block]) -> CollisionBlock:

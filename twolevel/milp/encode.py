@@ -48,6 +48,7 @@ __all__ = [
     "Signal",
     "Requirement",
     "Encoding",
+    "Emission",
     "EncodeError",
     "Encoder",
     "encode",
@@ -131,6 +132,27 @@ class Encoding:
     disjunctions: int = 0
     infeasible: bool = False  # a requirement is false by constants alone
     diagnostics: list[Diagnostic] = field(default_factory=list)
+    # stable mode: each requirement's folded tree (name, step, tree) and every block emission
+    # (:class:`Emission`), for refreshing the values of a model of the same structure
+    trees: list[tuple[str, int, object]] = field(default_factory=list)
+    emissions: list["Emission"] = field(default_factory=list)
+
+
+@dataclass(frozen=True, eq=False)
+class Emission:
+    """Where one vectorised block put its rows (stable mode): triplets ``tri`` and rows ``rows``
+    (encoder-local, i.e. relative to the start of the ``stl`` block), its binary columns
+    ``bins`` (global) and its structure ``struct`` (arrays that must match for a refresh)."""
+
+    kind: str
+    tri: slice
+    rows: slice
+    bins: np.ndarray
+    struct: tuple[np.ndarray, ...]
+
+
+def _has_block(t: Tree) -> bool:
+    return isinstance(t, Block) or (isinstance(t, Op) and not t.is_max and any(isinstance(k, Block) for k in t.kids))
 
 
 def _span(node: ast.Node | None) -> Span:
@@ -146,8 +168,13 @@ class Encoder:
         rules: Mapping[str, ast.Node] | None = None,
         builtins: Mapping[str, Builtin] | None = None,
         length: int | None = None,
+        stable: bool = False,
     ) -> None:
         self.b = builder
+        # stable: vectorised blocks keep redundant rows, faces and pairs so that a model's
+        # structure depends only on the formulas and the kept vehicle–step pairs (see Emission)
+        self.stable = stable
+        self.emissions: list[Emission] = []
         self.signals = signals
         self.dt = dt
         self.consts = dict(consts or {})
@@ -381,6 +408,10 @@ class Encoder:
             self._rows_of_guard.setdefault(guard, []).append(r)
         return r
 
+    def n_triplets(self) -> int:
+        """Triplets emitted so far (encoder-local)."""
+        return int(sum(c.size for c in self._c))
+
     def emit_rows(self, cols: np.ndarray, vals: np.ndarray, lo: np.ndarray) -> np.ndarray:
         """Emit rows ``Σ_j vals[i, j]·x[cols[i, j]] ≥ lo[i]`` at once (unguarded bookkeeping is
         the caller's); returns their global row indices."""
@@ -417,9 +448,9 @@ class Encoder:
         if s is None:
             return None
         if isinstance(s, AffineSignal):
-            C = np.zeros((self.T, n))
             rows = np.repeat(np.arange(self.T), np.diff(s.coef.indptr))
-            np.add.at(C, (rows, np.asarray(s.coef.indices)), np.asarray(s.coef.data, float))
+            flat = rows * n + np.asarray(s.coef.indices)
+            C = np.bincount(flat, weights=np.asarray(s.coef.data, float), minlength=self.T * n).reshape(self.T, n)
             out = (C, np.asarray(s.offset, float))
         else:
             out = (np.zeros((self.T, n)), np.broadcast_to(np.asarray(s, float), (self.T,)).astype(float))
@@ -475,8 +506,8 @@ class Encoder:
         """Add rows so that ``t ≥ margin`` holds whenever ``x[guard] = 1`` (always if −1)."""
         mlo, mhi = self.bounds(margin)
         tlo, thi = self.bounds(t)
-        if tlo >= mhi:
-            return  # always holds
+        if tlo >= mhi and not (self.stable and guard < 0 and _has_block(t)):
+            return  # always holds (stable mode still emits top-level blocks: a fixed structure)
         if thi < mlo:
             self._fail(guard)
             return
@@ -611,14 +642,18 @@ def encode(
     length: int | None = None,
     rho_weight: float = 1.0,
     rho_bounds: tuple[float, float] | None = None,
+    stable: bool = False,
 ) -> Encoding:
     """Encode ``requirements`` into ``builder`` (rows in one block named ``"stl"``).
 
     Satisfaction: every requirement's robustness ≥ ``eps``. Robustness: a margin variable ρ,
     ρ ≤ every requirement's robustness, cost ``−rho_weight·ρ``; ρ is bounded by the interval
     bounds of the requirements (or ``rho_bounds``). Encoding problems (non-linear predicates,
-    unknown names, unbounded big-M) come back as diagnostics, never as exceptions."""
-    enc = Encoder(builder, signals, dt, consts=consts, rules=rules, builtins=builtins, length=length)
+    unknown names, unbounded big-M) come back as diagnostics, never as exceptions. ``stable``:
+    vectorised blocks keep redundant rows (structure independent of the current values; see
+    :class:`Emission`) and the result lists the trees and emissions."""
+    enc = Encoder(builder, signals, dt, consts=consts, rules=rules, builtins=builtins, length=length,
+                  stable=stable)
     out = Encoding(mode=mode)
     try:
         trees: list[tuple[str, int, Tree]] = []
@@ -660,6 +695,9 @@ def encode(
     out.disjunctions = len(enc._disj)
     out.infeasible = enc.infeasible
     out.diagnostics.extend(enc.diagnostics)
+    if stable:
+        out.trees = trees
+        out.emissions = enc.emissions
     return out
 
 
