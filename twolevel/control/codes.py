@@ -10,7 +10,7 @@ from twolevel.diagnostics import Code, Severity
 
 E, W, I = Severity.ERROR, Severity.WARNING, Severity.INFO
 
-__all__ = ["MIL510", "MIL511", "MIL512", "MIL513", "MIL514", "MIL515", "MIL516"]
+__all__ = ["MIL510", "MIL511", "MIL512", "MIL513", "MIL514", "MIL515", "MIL516", "MIL517"]
 
 MIL510 = Code("MIL510", "signal-not-predictable", W,
               "A rule reads a signal the MPC cannot predict over its horizon; the rule is left to the low level.")
@@ -21,3 +21,6 @@ MIL513 = Code("MIL513", "bad-plan-time", E, "The requested time is outside the r
 MIL514 = Code("MIL514", "emit-failed", E, "The model could not be written to the requested file.")
 MIL515 = Code("MIL515", "fallback-plan", W, "The MPC found no plan in time; the previous plan shifted (or braking) is used.")
 MIL516 = Code("MIL516", "bad-trace", E, "The trace file cannot give the ego state at the requested time.")
+MIL517 = Code("MIL517", "rule-recovering", W,
+              "A rule is already violated now by signals known at solve time (e.g. a vehicle cut in closer "
+              "than the gap); the MPC requires it from the first step the plan can still change, to recover.")

@@ -76,7 +76,10 @@ class MPCSettings:
     (relative), satisfaction margin ``eps``, whether to evaluate ``rule_robustness``, and whether
     to re-linearise (about the reference, then about braking) when the step is infeasible;
     ``refresh`` (``modes`` solver): reuse a model of the same structure with new values (:mod:`twolevel.control.template`),
-    keeping vehicle–step pairs within d + ``pad`` [m] so the structure lasts several steps."""
+    keeping vehicle–step pairs within d + ``pad`` [m] so the structure lasts several steps;
+    ``search_ms`` [ms]: the mode search's optional phases (seeds, descent, flips, B&B) stop after
+    that long (and always within ``time_limit``; ignored when ``time_limit`` is None),
+    ``max_flip_qps``: at most that many QPs of dual-ordered flips."""
 
     H: int = 10
     dt: float = 0.1
@@ -89,6 +92,8 @@ class MPCSettings:
     relinearise: bool = True
     refresh: bool = True
     pad: float = 2.0
+    search_ms: float | None = 20.0
+    max_flip_qps: int | None = 12
 
 
 @dataclass(frozen=True)
@@ -241,13 +246,13 @@ class HighLevelController:
         return step, hist, P
 
     def build(self, step: StepData, past: Mapping[str, np.ndarray], P: int,
-              drop: frozenset[str] = frozenset()) -> Assembled:
+              drop: frozenset[str] = frozenset(), recover_after: Mapping[str, int] | None = None) -> Assembled:
         """The step's model with every rule not in ``drop``."""
         st = self.settings
         names = set().union(*(r.reads for r in self.rules if r.name not in drop)) if self.rules else set()
         reqs = self.requirements(drop, P)
         key = (P, tuple(r.name for r in reqs))
-        use = st.refresh and st.solver == "modes"  # the exact HiGHS path keeps the minimal encoding
+        use = st.refresh and st.solver == "modes" and not recover_after  # HiGHS: the minimal encoding
         if use:
             for tpl in self.templates.candidates(key):
                 asm = refresh(tpl, step, reqs, past, names=names, dt=st.dt, eps=st.eps, weights=st.weights,
@@ -259,7 +264,8 @@ class HighLevelController:
                     return asm
             self.templates.misses += 1
         asm = assemble(step, reqs, H=st.H, dt=st.dt, params=self.params, weights=st.weights, past=past, P=P,
-                       names=names, cache=self._pattern_cache, eps=st.eps, stable=use, pad=st.pad)
+                       names=names, cache=self._pattern_cache, eps=st.eps, stable=use, pad=st.pad,
+                       recover_after=recover_after)
         tpl = template_of(asm, st.eps) if use else None
         if tpl is not None:
             self.templates.add(key, tpl)
@@ -286,6 +292,22 @@ class HighLevelController:
             self._qps.popitem(last=False)
         return qp, ms
 
+    def _recover_later(self, res: PlanResult, asm: Assembled, step: StepData, past: Mapping[str, np.ndarray], P: int,
+                       tm: dict[str, float], t0: float) -> tuple[PlanResult, Assembled]:
+        """A rule violated now was required from a step the solver still finds infeasible: require
+        it one step later each time until a plan exists (within the time limit)."""
+        from twolevel.control.solve import solve_step
+
+        after: dict[str, int] = {}
+        lim = self.settings.time_limit
+        while not res.ok and res.status != "time_limit" and asm.encoding.recovered and (
+                lim is None or time.perf_counter() - t0 < lim):
+            for n, t, t2 in asm.encoding.recovered:
+                after[n] = t2 - t
+            asm = self.build(step, past, P, recover_after=after)
+            res = solve_step(self, step, asm, tm, t0)
+        return res, asm
+
     def solve(self, ego_state: Sequence[float], t: float, world_state: TrafficState | Snapshot | None = None,
               history: Mapping[str, np.ndarray] | None = None) -> PlanResult:
         """One MPC step (see the module docstring)."""
@@ -300,6 +322,7 @@ class HighLevelController:
         t2 = time.perf_counter()
         tm["assembly"] = (t2 - t1) * 1e3
         res = solve_step(self, step, asm, tm, t0)
+        res, asm = self._recover_later(res, asm, step, past, P, tm, t0)
         # the linearisation about the previous plan can be far from a plan that now has to differ
         # (e.g. braking instead of swerving): re-linearise about the reference, then about braking
         for about in ("reference", "brake") if self.settings.relinearise else ():

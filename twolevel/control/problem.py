@@ -25,7 +25,7 @@ from typing import Mapping, Sequence
 import numpy as np
 import scipy.sparse as sp
 
-from twolevel.diagnostics import Diagnostic
+from twolevel.diagnostics import Diagnostic, Span
 from twolevel.milp.builder import ModelBuilder
 from twolevel.milp.collision import collision_free_builtin
 from twolevel.milp.encode import AffineSignal, Encoding, Requirement, encode
@@ -286,11 +286,13 @@ def assemble(
     step: StepData, requirements: Sequence[Requirement], *, H: int, dt: float, params: BicycleParams,
     weights: Weights, past: Mapping[str, np.ndarray], P: int, names: set[str],
     cache: PatternCache | None = None, eps: float = 1e-4, stable: bool = False, pad: float = 0.0,
-    keep: np.ndarray | None = None,
+    keep: np.ndarray | None = None, recover: bool = True, recover_after: Mapping[str, int] | None = None,
 ) -> Assembled:
     """Build the step's model (dynamics, cost, every requirement's MILCs). ``stable``: the
     encoder's stable mode (a structure that :mod:`twolevel.control.template` can refresh), with
-    vehicle–step pairs kept within d + ``pad`` [m] (or the pair codes ``keep``)."""
+    vehicle–step pairs kept within d + ``pad`` [m] (or the pair codes ``keep``). ``recover``: a rule
+    already false now by known signals is required from the first step the plan can change
+    (``MIL517`` warning) instead of making the step infeasible."""
     b = ModelBuilder()
     xb = b.add_vars("x", 4 * H, step.lo.ravel(), step.hi.ravel())
     ub = b.add_vars("u", 2 * H, np.tile([-params.delta_max, params.a_min], H),
@@ -302,10 +304,19 @@ def assemble(
     T = P + 1 + H
     others = others_of(step, P)
     cf = collision_free_builtin("x", "y", others, ids=np.asarray(hc.index, np.int64), pad=pad, keep=keep)
-    enc = encode(b, requirements, sigs, dt, eps=eps, length=T, builtins={"collision_free": cf}, stable=stable)
+    enc = encode(b, requirements, sigs, dt, eps=eps, length=T, builtins={"collision_free": cf}, stable=stable,
+                 recover=recover, recover_after=recover_after)
     model = b.build(cache)
     _cost(model, step, lay, weights)
-    return Assembled(model, lay, enc, sigs, list(enc.diagnostics))
+    diags = list(enc.diagnostics)
+    if enc.recovered:
+        from twolevel.control.codes import MIL517
+
+        for name, t, t2 in enc.recovered:
+            diags.append(MIL517(f"t = {step.t:.2f} s: rule '{name}' is already violated by known signals; "
+                                f"required from step k = {t2 - P} of the horizon on (recovering)", Span("<mpc>"),
+                                hint="the plan restores the rule as fast as the dynamics allow"))
+    return Assembled(model, lay, enc, sigs, diags)
 
 
 def shape_key(m: MilpModel) -> tuple:

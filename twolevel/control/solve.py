@@ -124,7 +124,9 @@ def solve_step(ctrl: "HighLevelController", step: StepData, asm: Assembled, tm: 
         tm["backend"] = (time.perf_counter() - t1) * 1e3
         left = None if st.time_limit is None else max(st.time_limit * 1e3 - (time.perf_counter() - t0) * 1e3, 1.0)
         if st.solver == "modes":
-            r = ms.run(seed_points=seed_points(ctrl, step, asm), budget_ms=left, gap=st.gap)
+            capped = st.time_limit is not None
+            r = ms.run(seed_points=seed_points(ctrl, step, asm), budget_ms=left, gap=st.gap,
+                       search_ms=st.search_ms if capped else None, max_flip_qps=st.max_flip_qps if capped else None)
             tm.update({k: v for k, v in r.timings_ms.items()})
             status, cost, x, mode, qps, cert, gap = r.status, r.cost, r.x, r.mode, r.qps, r.certified, r.gap
         elif st.solver == "highs":
@@ -171,7 +173,7 @@ def solve_step(ctrl: "HighLevelController", step: StepData, asm: Assembled, tm: 
                 status = "infeasible" if sol.status is Status.INFEASIBLE else "time_limit"
         if x is None:
             msg = "no mode satisfies every rule" if status == "infeasible" else "no plan found within the time limit"
-    tm["solve"] = sum(v for k, v in tm.items() if k not in ("linearise", "assembly"))
+    tm["solve"] = sum(v for k, v in tm.items() if k not in ("linearise", "assembly", "solve", "total", "relinearise"))
     tm["total"] = (time.perf_counter() - t0) * 1e3
     nb, nr, nc = model.n_binaries, model.n_rows, model.n_cols
     if x is None:
@@ -186,5 +188,8 @@ def solve_step(ctrl: "HighLevelController", step: StepData, asm: Assembled, tm: 
         t4 = time.perf_counter()
         rob = monitor_rules(ctrl, step, asm, x)
         tm["monitor"] = (time.perf_counter() - t4) * 1e3
+    if asm.encoding.recovered:
+        msg = "recovering: " + "; ".join(f"rule '{n}' violated now, required from k = {t2 - t}"
+                                         for n, t, t2 in asm.encoding.recovered)
     return PlanResult(status, float(cost), controls, states, np.asarray(mode), nb, nr, nc, qps, bool(cert), tm, rob,
                       msg, float(gap), tuple(diags), st.solver)

@@ -82,7 +82,7 @@ def template_of(asm: Assembled, eps: float) -> StepTemplate | None:
     """The template of a model built in stable mode, or None when it cannot be refreshed (a rule
     outside the vectorised blocks, an infeasible or robustness-mode encoding)."""
     enc = asm.encoding
-    if enc.infeasible or enc.mode != "satisfaction" or enc.rho >= 0 or "stl" not in asm.model.row_blocks:
+    if enc.infeasible or enc.recovered or enc.mode != "satisfaction" or enc.rho >= 0 or "stl" not in asm.model.row_blocks:
         return None
     kinds = []
     for _, _, tree in enc.trees:

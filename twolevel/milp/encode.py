@@ -136,6 +136,7 @@ class Encoding:
     # (:class:`Emission`), for refreshing the values of a model of the same structure
     trees: list[tuple[str, int, object]] = field(default_factory=list)
     emissions: list["Emission"] = field(default_factory=list)
+    recovered: list[tuple[str, int, int]] = field(default_factory=list)
 
 
 @dataclass(frozen=True, eq=False)
@@ -643,6 +644,8 @@ def encode(
     rho_weight: float = 1.0,
     rho_bounds: tuple[float, float] | None = None,
     stable: bool = False,
+    recover: bool = False,
+    recover_after: Mapping[str, int] | None = None,
 ) -> Encoding:
     """Encode ``requirements`` into ``builder`` (rows in one block named ``"stl"``).
 
@@ -651,10 +654,16 @@ def encode(
     bounds of the requirements (or ``rho_bounds``). Encoding problems (non-linear predicates,
     unknown names, unbounded big-M) come back as diagnostics, never as exceptions. ``stable``:
     vectorised blocks keep redundant rows (structure independent of the current values; see
-    :class:`Emission`) and the result lists the trees and emissions."""
+    :class:`Emission`) and the result lists the trees and emissions. ``recover`` (satisfaction
+    mode): a requirement already false at its step by what is known at solve time is required
+    instead from the first later step at which it can hold given the variables' bounds (the
+    first step whose value the plan can still change); each such shift is listed in
+    ``Encoding.recovered`` as (name, step, new step). ``recover_after`` {name: k}: search from step
+    + k + 1 on (after a recovery that the solver found infeasible)."""
     enc = Encoder(builder, signals, dt, consts=consts, rules=rules, builtins=builtins, length=length,
                   stable=stable)
     out = Encoding(mode=mode)
+    requirements = list(requirements)
     try:
         trees: list[tuple[str, int, Tree]] = []
         for req in requirements:
@@ -677,6 +686,8 @@ def encode(
             margin: Lin | float = Lin((out.rho,), (1.0,), 0.0)
         else:
             margin = float(eps)
+        if recover and mode == "satisfaction":
+            trees = _recover(enc, trees, list(requirements), float(eps), out, dict(recover_after or {}))
         for name, t, tree in trees:
             enc._label = f"{name}@{t}"
             before = enc.infeasible
@@ -699,6 +710,29 @@ def encode(
         out.trees = trees
         out.emissions = enc.emissions
     return out
+
+
+def _recover(enc: Encoder, trees: list[tuple[str, int, Tree]], reqs: list[Requirement], eps: float,
+             out: Encoding, after: dict[str, int]) -> list[tuple[str, int, Tree]]:
+    """Shift each requirement that folds to false (upper bound below ε) to its first later step
+    at which it can hold; see :func:`encode`."""
+    formulas = [r.formula for r in reqs for _ in r.times]
+    res = []
+    for (name, t, tree), f in zip(trees, formulas):
+        if enc.bounds(tree)[1] >= eps:
+            res.append((name, t, tree))
+            continue
+        for t2 in range(t + 1 + after.get(name, 0), enc.T):
+            tree2 = enc.rob(f, t2, 1.0)
+            if enc.bounds(tree2)[1] >= eps:
+                if isinstance(tree2, Op):
+                    enc._refs[id(tree2)] = enc._refs.get(id(tree2), 0) + 1
+                out.recovered.append((name, t, t2))
+                res.append((name, t2, tree2))
+                break
+        else:
+            res.append((name, t, tree))
+    return res
 
 
 # ---------------------------------------------------------------------------- built-ins

@@ -173,11 +173,14 @@ class ModeSearch:
     def run(
         self, *, seeds: Sequence[np.ndarray] = (), seed_points: Sequence[np.ndarray] = (),
         budget_ms: float | None = 50.0, gap: float = 0.005, bnb_gap: float = 1e-4, abs_tol: float = 1e-6,
-        max_flips: int = 6, bnb: bool = True,
+        max_flips: int = 6, bnb: bool = True, search_ms: float | None = None, max_flip_qps: int | None = None,
     ) -> ModeResult:
         """Search a mode; see the module docstring. ``seeds``: choice arrays; ``seed_points``: full
         points x (unknown columns 0) to read modes off. ``budget_ms=None``: no time limit (the
-        branch-and-bound runs to completion)."""
+        branch-and-bound runs to completion). ``search_ms``: a further cap on the optional phases
+        (seeds, descent, flips, branch-and-bound) counted from the end of the read-off, within
+        ``budget_ms``; ``max_flip_qps``: at most that many QPs in the flips phase (the flips are
+        tried in decreasing order of the dual weight of the chosen disjunct's rows)."""
         t_start = time.perf_counter()
         self._memo.clear()
         self.qps = 0
@@ -217,6 +220,9 @@ class ModeSearch:
         else:
             consider(self.read_off(x_lb, allowed))
         t = lap("readoff", t)
+        if search_ms is not None:  # the optional phases get at most search_ms from here
+            cap = t + search_ms / 1e3
+            deadline = cap if deadline is None else min(deadline, cap)
         if D and not certified():
             for ch in list(seeds) + [self.read_off(p, allowed) for p in seed_points]:
                 if out_of_time() or certified():
@@ -236,7 +242,10 @@ class ModeSearch:
             # flips ordered by the duals of the chosen disjuncts' rows
             improved = True
             rounds = 0
-            while improved and best[3] is not None and not certified() and not out_of_time() and rounds < 3:
+            q0 = self.qps
+            flips_left = (lambda: True) if max_flip_qps is None else (lambda: self.qps - q0 < max_flip_qps)
+            while improved and best[3] is not None and not certified() and not out_of_time() and rounds < 3 \
+                    and flips_left():
                 improved = False
                 rounds += 1
                 z = np.abs(best[3])
@@ -247,10 +256,12 @@ class ModeSearch:
                 weight = w[g_sel]
                 order = np.argsort(-weight)
                 for d in order[:max_flips]:
-                    if weight[d] <= 1e-9 or out_of_time():
+                    if weight[d] <= 1e-9 or out_of_time() or not flips_left():
                         break
                     alts = [i for i in range(self.size[d]) if i != ch0[d] and allowed[self.gstart[d] + i]]
                     for i in alts:
+                        if not flips_left() or out_of_time():
+                            break
                         ch = ch0.copy()
                         ch[d] = i
                         if consider(ch):
