@@ -77,9 +77,10 @@ class MPCSettings:
     to re-linearise (about the reference, then about braking) when the step is infeasible;
     ``refresh`` (``modes`` solver): reuse a model of the same structure with new values (:mod:`twolevel.control.template`),
     keeping vehicle–step pairs within d + ``pad`` [m] so the structure lasts several steps;
-    ``search_ms`` [ms]: the mode search's optional phases (seeds, descent, flips, B&B) stop after
-    that long (and always within ``time_limit``; ignored when ``time_limit`` is None),
-    ``max_flip_qps``: at most that many QPs of dual-ordered flips."""
+    ``search_qps``: the mode search's optional phases (seeds, descent, flips, B&B) stop after that
+    many QPs (deterministic; ~1 ms each at 18 vehicles), ``search_ms`` [ms] optionally after that
+    long (time-dependent, so not deterministic), always within ``time_limit``; both ignored when
+    ``time_limit`` is None; ``max_flip_qps``: at most that many QPs of dual-ordered flips."""
 
     H: int = 10
     dt: float = 0.1
@@ -92,8 +93,9 @@ class MPCSettings:
     relinearise: bool = True
     refresh: bool = True
     pad: float = 2.0
-    search_ms: float | None = 20.0
-    max_flip_qps: int | None = 12
+    search_ms: float | None = None
+    search_qps: int | None = 16
+    max_flip_qps: int | None = 8
 
 
 @dataclass(frozen=True)
@@ -181,6 +183,7 @@ class HighLevelController:
         self._qps: OrderedDict[tuple, tuple[FixedModeQP, ModeSearch]] = OrderedDict()
         self._prev: tuple[float, np.ndarray, np.ndarray, np.ndarray] | None = None  # t, states, controls, mode
         self._s_hint: float | None = None
+        self._recover_at: dict[str, float] = {}  # rule → time [s] from which a recovering plan meets it
 
     # ------------------------------------------------------------------ construction helpers
     @classmethod
@@ -216,6 +219,7 @@ class HighLevelController:
         """Forget the previous plan (the next step linearises about the reference)."""
         self._prev = None
         self._s_hint = None
+        self._recover_at = {}
 
     # ------------------------------------------------------------------ one step
     def requirements(self, drop: frozenset[str] = frozenset(), P: int = 0) -> list[Requirement]:
@@ -300,6 +304,9 @@ class HighLevelController:
 
         after: dict[str, int] = {}
         lim = self.settings.time_limit
+        if not res.ok and not asm.encoding.recovered and self._recover_at:
+            # the hinted start did not help (the rule may no longer be violated): plain build
+            self._recover_at = {}
         while not res.ok and res.status != "time_limit" and asm.encoding.recovered and (
                 lim is None or time.perf_counter() - t0 < lim):
             for n, t, t2 in asm.encoding.recovered:
@@ -318,11 +325,20 @@ class HighLevelController:
         step, past, P = self.prepare(ego_state, t, world_state, history)
         t1 = time.perf_counter()
         tm["linearise"] = (t1 - t0) * 1e3
-        asm = self.build(step, past, P)
+        # a rule being recovered: start from the time the previous plan met it again (the same
+        # absolute time; earlier starts were infeasible then), not from the first step
+        dt = self.settings.dt
+        hint = {n: int(round((ta - t) / dt)) - 1 for n, ta in self._recover_at.items()
+                if int(round((ta - t) / dt)) >= 2}
+        asm = self.build(step, past, P, recover_after=hint or None)
         t2 = time.perf_counter()
         tm["assembly"] = (t2 - t1) * 1e3
         res = solve_step(self, step, asm, tm, t0)
         res, asm = self._recover_later(res, asm, step, past, P, tm, t0)
+        if res.ok and asm.encoding.recovered:
+            self._recover_at = {n: t + (t2 - t1) * dt for n, t1, t2 in asm.encoding.recovered}
+        elif res.ok:
+            self._recover_at = {}
         # the linearisation about the previous plan can be far from a plan that now has to differ
         # (e.g. braking instead of swerving): re-linearise about the reference, then about braking
         for about in ("reference", "brake") if self.settings.relinearise else ():

@@ -126,7 +126,8 @@ def solve_step(ctrl: "HighLevelController", step: StepData, asm: Assembled, tm: 
         if st.solver == "modes":
             capped = st.time_limit is not None
             r = ms.run(seed_points=seed_points(ctrl, step, asm), budget_ms=left, gap=st.gap,
-                       search_ms=st.search_ms if capped else None, max_flip_qps=st.max_flip_qps if capped else None)
+                       search_ms=st.search_ms if capped else None, max_flip_qps=st.max_flip_qps if capped else None,
+                       search_qps=st.search_qps if capped else None)
             tm.update({k: v for k, v in r.timings_ms.items()})
             status, cost, x, mode, qps, cert, gap = r.status, r.cost, r.x, r.mode, r.qps, r.certified, r.gap
         elif st.solver == "highs":

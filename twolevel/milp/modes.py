@@ -174,13 +174,15 @@ class ModeSearch:
         self, *, seeds: Sequence[np.ndarray] = (), seed_points: Sequence[np.ndarray] = (),
         budget_ms: float | None = 50.0, gap: float = 0.005, bnb_gap: float = 1e-4, abs_tol: float = 1e-6,
         max_flips: int = 6, bnb: bool = True, search_ms: float | None = None, max_flip_qps: int | None = None,
+        search_qps: int | None = None,
     ) -> ModeResult:
         """Search a mode; see the module docstring. ``seeds``: choice arrays; ``seed_points``: full
         points x (unknown columns 0) to read modes off. ``budget_ms=None``: no time limit (the
         branch-and-bound runs to completion). ``search_ms``: a further cap on the optional phases
         (seeds, descent, flips, branch-and-bound) counted from the end of the read-off, within
-        ``budget_ms``; ``max_flip_qps``: at most that many QPs in the flips phase (the flips are
-        tried in decreasing order of the dual weight of the chosen disjunct's rows)."""
+        ``budget_ms``; ``search_qps``: the same cap counted in QPs (deterministic, unlike time);
+        ``max_flip_qps``: at most that many QPs in the flips phase (the flips are tried in
+        decreasing order of the dual weight of the chosen disjunct's rows)."""
         t_start = time.perf_counter()
         self._memo.clear()
         self.qps = 0
@@ -189,7 +191,11 @@ class ModeSearch:
         allowed = self.allowed()
         D = self.D
 
+        qp_cap = [None]  # QPs allowed in total once the optional phases start
+
         def out_of_time() -> bool:
+            if qp_cap[0] is not None and self.qps >= qp_cap[0]:
+                return True
             return deadline is not None and time.perf_counter() > deadline
 
         def lap(name: str, t0: float) -> float:
@@ -223,6 +229,8 @@ class ModeSearch:
         if search_ms is not None:  # the optional phases get at most search_ms from here
             cap = t + search_ms / 1e3
             deadline = cap if deadline is None else min(deadline, cap)
+        if search_qps is not None:  # and at most search_qps QPs
+            qp_cap[0] = self.qps + search_qps
         if D and not certified():
             for ch in list(seeds) + [self.read_off(p, allowed) for p in seed_points]:
                 if out_of_time() or certified():
