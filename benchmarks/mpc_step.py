@@ -24,8 +24,6 @@ from pathlib import Path
 import numpy as np
 
 from twolevel.control.high_level import HighLevelController, MPCSettings
-from twolevel.milp.modes import ModeSearch
-from twolevel.milp.qp import FixedModeQP
 from twolevel.models import bicycle
 from twolevel.stl.lint import load_ruleset
 from twolevel.world.loader import load_scenario
@@ -88,18 +86,22 @@ def run(n: int, steps: int, seed: int, tmp: Path, exact: bool) -> dict:
     e = w.ego
     x = np.array([e.x, e.y, e.psi, e.v])
     tr = w.traffic0
-    rec = {p: {"t": [], "ph": [], "bin": [], "rows": [], "qps": [], "cost": [], "status": []} for p in ctl}
+    rec = {p: {"t": [], "cpu": [], "ph": [], "bin": [], "rows": [], "qps": [], "cost": [], "status": []} for p in ctl}
     rec["exact"] = []
     rec["nearby"] = []
     for k in range(steps):
         t = 0.1 * k
         prev = ctl["modes"]._prev, ctl["modes"]._s_hint
+        rec_at = dict(ctl["modes"]._recover_at)
         out = {}
         for p, c in ctl.items():
             c._prev, c._s_hint = prev
+            c._recover_at = dict(rec_at)
+            c0 = time.process_time()
             r = c.solve(x, t, tr, None)
-            out[p] = r
             R = rec[p]
+            R["cpu"].append((time.process_time() - c0) * 1e3)
+            out[p] = r
             R["t"].append(r.timings_ms["total"])
             R["ph"].append(r.timings_ms)
             R["bin"].append(r.binaries)
@@ -108,13 +110,13 @@ def run(n: int, steps: int, seed: int, tmp: Path, exact: bool) -> dict:
             R["cost"].append(r.cost if r.ok else np.inf)
             R["status"].append(r.status)
         ctl["highs"]._prev, ctl["highs"]._s_hint = prev
-        if exact:  # the same step, B&B to completion (same linearisation point as the modes path)
-            ref._prev, ref._s_hint = prev
-            step, past, P = ref.prepare(x, t, tr, None)
-            asm = ref.build(step, past, P)
+        if exact:  # the same step, B&B to completion (same linearisation point as the modes path,
+            # same recovery of rules violated now)
+            ref._prev, ref._s_hint, ref._recover_at = prev[0], prev[1], dict(rec_at)
+            step, _, _ = ref.prepare(x, t, tr, None)
             rec["nearby"].append(len(step.hc.index))
-            res = ModeSearch(FixedModeQP(asm.model)).run(budget_ms=None) if not asm.encoding.infeasible else None
-            rec["exact"].append(res.cost if res is not None and res.x is not None else np.inf)
+            res = ref.solve(x, t, tr, None)
+            rec["exact"].append(res.cost if res.ok else np.inf)
         r = out["modes"]
         ctl["modes"]._prev = (t, r.states, r.controls, r.mode) if r.ok or r.status == "fallback" else ctl["modes"]._prev
         x = bicycle.step(x, r.controls[0], 0.1, ctl["modes"].params)
@@ -132,7 +134,9 @@ def summarize(n: int, rec: dict) -> None:
         t = np.array(R["t"])
         meds[p] = t
         phases = sorted({k for ph in R["ph"] for k in ph if k not in ("total",)})
-        line = f"  {p:5s} total median {np.median(t):6.2f}  p95 {pct(t, 95):6.2f}  p99 {pct(t, 99):6.2f} ms | " \
+        cpu = np.array(R["cpu"])
+        line = f"  {p:5s} total median {np.median(t):6.2f}  p95 {pct(t, 95):6.2f}  p99 {pct(t, 99):6.2f} ms " \
+               f"(CPU median {np.median(cpu):6.2f} p99 {pct(cpu, 99):6.2f}) | " \
                f"binaries med {np.median(R['bin']):.0f} max {max(R['bin'])} | rows med {np.median(R['rows']):.0f} | " \
                f"QPs/step med {np.median(R['qps']):.0f} p99 {pct(R['qps'], 99):.0f}"
         if ex is not None:
