@@ -190,16 +190,9 @@ class HighLevelController:
     def from_world(cls, world: World, settings: MPCSettings | None = None, *, solver: str | None = None,
                    params: BicycleParams | None = None) -> tuple["HighLevelController | None", list[Diagnostic]]:
         """The controller of a scenario's world with its own rule files and settings."""
-        from twolevel.stl.lint import load_ruleset
-        from twolevel.world.provided import PROVIDED_SIGNALS
+        from twolevel.world.world import load_rulesets
 
-        diags: list[Diagnostic] = []
-        sets = []
-        for path, consts in world.rule_files:
-            rs, d = load_ruleset(path, dict(consts), dt=world.settings.dt, provided_signals=PROVIDED_SIGNALS)
-            diags += d
-            if rs is not None:
-                sets.append(rs)
+        sets, diags = load_rulesets(world)
         if any(d.is_error for d in diags):
             return None, diags
         st = settings or MPCSettings(H=world.settings.H, dt=world.settings.dt, solver=solver or world.settings.solver,

@@ -156,16 +156,9 @@ class NmpcController:
                    ) -> tuple["NmpcController | None", list[Diagnostic]]:
         """The NMPC of a scenario's world with its own rule files and settings."""
         from twolevel.control.codes import MIL512
-        from twolevel.stl.lint import load_ruleset
-        from twolevel.world.provided import PROVIDED_SIGNALS
+        from twolevel.world.world import load_rulesets
 
-        diags: list[Diagnostic] = []
-        sets = []
-        for path, consts in world.rule_files:
-            rs, d = load_ruleset(path, dict(consts), dt=world.settings.dt, provided_signals=PROVIDED_SIGNALS)
-            diags += d
-            if rs is not None:
-                sets.append(rs)
+        sets, diags = load_rulesets(world)
         if any(d.is_error for d in diags):
             return None, diags
         st = settings or MPCSettings(H=world.settings.H, dt=world.settings.dt, time_limit=world.settings.time_limit)
