@@ -60,7 +60,7 @@ def test_stops_before_a_stop_line(tmp_path) -> None:
         "input float v\ninput float d_stop\n"
         "stop_sign = always[0:1] ((d_stop <= 0) -> once[0:10] ((v <= 0.1) and (d_stop <= 3)));\n"))
     ctrl = controller(w, [stop])
-    xs, res, _ = closed_loop(ctrl, w, 70, history_names=("v", "d_stop", "s"))
+    xs, res, _ = closed_loop(ctrl, w, 90, history_names=("v", "d_stop", "s"))
     s, _ = _lateral(w, xs)
     line = float(w.route_stops[0])
     d = line - s
@@ -106,3 +106,38 @@ def test_passes_a_slow_vehicle_when_the_next_lane_is_free(tmp_path) -> None:
     _, e = _lateral(w, xs)
     assert np.max(np.abs(e)) > 2.0                # by using the next lane
     assert np.mean(xs[:, 3]) > 8.0                # without slowing to the slow car's speed
+
+
+def test_stops_before_a_stop_line_straight_and_in_lane(tmp_path) -> None:
+    # regression: with a heading error the plan used to steer at full lock (sideways motion
+    # shortened the linearised route progress, which "helped" the stop rule) and to reach the line
+    # at the end of the horizon at speed; now the terminal can-still-stop condition brakes from
+    # first sight and the plan keeps straight in its lane
+    w = make_world(tmp_path, "urban.yaml", "{start: {lane: north, s: 66}, speed: 6.0}",
+                   "{start: {lane: north, s: 66}, goal: {lane: north, s: 200}}")
+    stop = rules(tmp_path, (
+        "input float v\ninput float d_stop\n"
+        "stop_sign = always[0:1] ((d_stop <= 0) -> once[0:10] ((v <= 0.1) and (d_stop <= 3)));\n"))
+    ctrl = controller(w, [stop])
+    x0 = np.array([w.ego.x, w.ego.y, w.ego.psi + 0.04, w.ego.v])
+    xs, res, _ = closed_loop(ctrl, w, 45, x0=x0, history_names=("v", "d_stop", "s"))
+    s, e = _lateral(w, xs)
+    d = float(w.route_stops[0]) - s
+    assert all(r.ok for r in res)
+    assert np.all(d > 0), "never past the line"
+    assert xs[-1, 3] < 0.6 and d[-1] < 1.0          # nearly stopped, close in front of it
+    delta = np.array([r.controls[0, 0] for r in res])
+    assert np.max(np.abs(delta[10:])) < 0.05       # no swerve once the line is in view
+    assert np.max(np.abs(e[10:])) < 0.2            # in its lane
+
+
+def test_stops_at_the_goal(tmp_path) -> None:
+    # regression: the reference piled up at the route's end and the car stopped metres past it
+    w = make_world(tmp_path, "urban.yaml", "{start: {lane: north, s: 66}, speed: 6.0}",
+                   "{start: {lane: north, s: 66}, goal: {lane: north, s: 80}}")
+    ctrl = controller(w, [])
+    xs, res, _ = closed_loop(ctrl, w, 60)
+    s, _ = _lateral(w, xs)
+    end = float(w.route.s[-1])
+    assert np.max(s) <= end + 0.05
+    assert xs[-1, 3] < 0.3 and s[-1] > end - 1.0

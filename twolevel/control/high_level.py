@@ -80,7 +80,11 @@ class MPCSettings:
     ``search_qps``: the mode search's optional phases (seeds, descent, flips, B&B) stop after that
     many QPs (deterministic; ~1 ms each at 18 vehicles), ``search_ms`` [ms] optionally after that
     long (time-dependent, so not deterministic), always within ``time_limit``; both ignored when
-    ``time_limit`` is None; ``max_flip_qps``: at most that many QPs of dual-ordered flips."""
+    ``time_limit`` is None; ``max_flip_qps``: at most that many QPs of dual-ordered flips;
+    ``stop_decel`` [m/s²] and ``stop_margin`` [m]: the terminal can-still-stop condition before a
+    stop line or red light a rule guards (:mod:`twolevel.control.guards`; the scenario's
+    ``yellow_decel`` in :meth:`HighLevelController.from_world`); ``band``: keep the lateral offset
+    within the lanes that run the route's way."""
 
     H: int = 10
     dt: float = 0.1
@@ -96,6 +100,9 @@ class MPCSettings:
     search_ms: float | None = None
     search_qps: int | None = 16
     max_flip_qps: int | None = 8
+    stop_decel: float = 3.0
+    stop_margin: float = 0.3
+    band: bool = True
 
 
 @dataclass(frozen=True)
@@ -178,6 +185,8 @@ class HighLevelController:
                 depth = analysis.past_depth(f, dt)
                 steps = int(round(depth / dt)) if math.isfinite(depth) else 10 ** 6
                 self.rules.append(_Rule(r.name, f, reads, steps))
+        reads_all = set().union(*(r.reads for r in self.rules)) if self.rules else set()
+        self.stop_rules = ("d_stop" in reads_all, bool({"light_red", "d_light"} & reads_all))
         self._pattern_cache = PatternCache(capacity=16)
         self.templates = TemplateCache(capacity=4)
         self._qps: OrderedDict[tuple, tuple[FixedModeQP, ModeSearch]] = OrderedDict()
@@ -196,7 +205,7 @@ class HighLevelController:
         if any(d.is_error for d in diags):
             return None, diags
         st = settings or MPCSettings(H=world.settings.H, dt=world.settings.dt, solver=solver or world.settings.solver,
-                                     time_limit=world.settings.time_limit)
+                                     time_limit=world.settings.time_limit, stop_decel=world.settings.yellow_decel)
         if solver is not None:
             st = MPCSettings(**{**st.__dict__, "solver": solver})
         if params is None:
@@ -236,7 +245,9 @@ class HighLevelController:
         if "delta" in hist and "a" in hist and len(hist["delta"]) and len(hist["a"]):
             u_prev = np.array([hist["delta"][-1], hist["a"][-1]])
         step = prepare_step(self.world, np.asarray(ego_state, float), t, traffic, H=H, dt=dt, params=self.params,
-                            prev=prev, u_prev=u_prev, memory=memory, s_hint=self._s_hint, about=about)
+                            prev=prev, u_prev=u_prev, memory=memory, s_hint=self._s_hint, about=about,
+                            stop_rules=self.stop_rules, stop_decel=self.settings.stop_decel,
+                            stop_margin=self.settings.stop_margin, band=self.settings.band)
         names = set().union(*(r.reads for r in self.rules)) if self.rules else set()
         depth = max((r.depth for r in self.rules), default=0)
         P = history_length(hist, names, depth)

@@ -12,11 +12,12 @@ and the state bounds (reachable boxes). Units: m, rad, m/s, s.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Mapping
 
 import numpy as np
 
+from twolevel.control.guards import TerminalStop, drivable_band, stop_lines, terminal_stop
 from twolevel.models import bicycle
 from twolevel.models.params import BicycleParams
 from twolevel.world.signals import HorizonConstants, StopMemory, horizon_constants
@@ -34,7 +35,11 @@ class StepData:
     ``c`` (H, 4): x_{k+1} ≈ A_k x_k + B_k u_k + c_k; ``omega`` (H, 4): waypoints for k = 1..H;
     ``s_ref`` (H+1,) [m] route positions of the waypoints; ``s_bar``/``h_bar``/``p_bar``: route
     position, tangent heading and route point of the linearisation point's projection (k = 0..H),
-    for s_k ≈ s̄_k + t̄_kᵀ(p_k − p̄_k); ``lo``/``hi`` (H, 4): state bounds for k = 1..H."""
+    for s_k ≈ s̄_k + t̄_kᵀ(p_k − p̄_k); ``lo``/``hi`` (H, 4): state bounds for k = 1..H;
+    ``e_lo``/``e_hi`` (H,) [m]: bounds on the lateral offset e_k ≈ n̄_kᵀ(p_k − p̄_k) for k = 1..H
+    (:func:`twolevel.control.guards.drivable_band`, widened to include where the ego and the
+    linearisation point already are); ``term``: the can-still-stop terminal condition
+    (:func:`twolevel.control.guards.terminal_stop`, inactive when no line applies)."""
 
     t: float
     x0: np.ndarray
@@ -53,6 +58,9 @@ class StepData:
     hi: np.ndarray
     hc: HorizonConstants
     lane_width: float
+    e_lo: np.ndarray
+    e_hi: np.ndarray
+    term: TerminalStop = TerminalStop()
 
 
 def wrap_to(angle: np.ndarray | float, ref: float) -> np.ndarray:
@@ -103,18 +111,49 @@ def _reference_controls(route_kappa: np.ndarray, v_ref: np.ndarray, dt: float, p
     return np.stack([delta, acc], axis=1)
 
 
+def _braking(v0: float, H: int, dt: float, params: BicycleParams) -> tuple[float, float]:
+    """Distance [m] and speed [m/s] after H steps of full braking from ``v0`` (no reversing)."""
+    v = v0 + params.a_min * dt * np.arange(1, H + 1)
+    t_stop = v0 / -params.a_min
+    T = min(H * dt, t_stop)
+    return v0 * T + 0.5 * params.a_min * T * T, max(float(v[-1]), 0.0)
+
+
+def _reference_to(route: object, s0: float, v0: float, H: int, dt: float, s_end: float, decel: float,
+                  a_max: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
+    """Like :meth:`~twolevel.world.geometry.Route.reference`, but ending with a stop at
+    ``s_end`` [m]: the target speed is at most sqrt(2·``decel``·(s_end − s)), the reference brakes
+    as hard as reaching it needs, and positions never pass ``s_end``."""
+    s = np.empty(H + 1)
+    v = np.empty(H + 1)
+    s[0], v[0] = s0, v0
+    for k in range(H):  # H ≈ 10 scalar steps
+        d = max(s_end - s[k], 0.0)
+        target = min(float(route.desired_speed_at(s[k])), math.sqrt(2.0 * decel * d))  # type: ignore[attr-defined]
+        need = v[k] * v[k] / (2.0 * max(d, 1e-3))
+        v[k + 1] = min(max(target, v[k] - max(a_max, need) * dt, 0.0), v[k] + a_max * dt)
+        s[k + 1] = min(s[k] + 0.5 * (v[k] + v[k + 1]) * dt, max(s_end, s[k]))
+        if s[k + 1] >= s_end - 1e-9:
+            v[k + 1] = 0.0
+    return s, v
+
+
 def prepare_step(
     world: World, x0: np.ndarray, t: float, traffic: TrafficState, *, H: int, dt: float,
     params: BicycleParams, prev: tuple[np.ndarray, np.ndarray] | None = None,
     u_prev: np.ndarray | None = None, memory: StopMemory | None = None, s_hint: float | None = None,
-    about: str = "plan",
+    about: str = "plan", stop_rules: tuple[bool, bool] = (False, False), stop_decel: float = 3.0,
+    stop_margin: float = 0.3, band: bool = True,
 ) -> StepData:
     """Everything known at time ``t`` [s] for ego state ``x0`` = (X, Y, ψ, v).
 
     ``prev`` = (states (H+1, 4), controls (H, 2)) of the previous plan, made one step ago; it is
     shifted by one step to give the linearisation point (``about="plan"``); ``about="reference"``
     linearises about a rollout of the reference's controls, ``"brake"`` about full braking. ``u_prev`` [δ, a] is the control applied
-    during the last step (for the ‖u_0 − u_{−1}‖² term; default the previous plan's first)."""
+    during the last step (for the ‖u_0 − u_{−1}‖² term; default the previous plan's first).
+    ``stop_rules`` = (a rule reads d_stop, a rule reads light_red/d_light): which lines the
+    terminal can-still-stop condition guards, with deceleration ``stop_decel`` [m/s²] and
+    ``stop_margin`` [m] before the line; ``band``: bound the lateral offset to the drivable band."""
     route = world.route
     x0 = np.asarray(x0, dtype=float)[:4].copy()
     if s_hint is not None and math.isfinite(s_hint):
@@ -123,6 +162,19 @@ def prepare_step(
         s_arr, _ = route.local_coordinates(x0[None, :2])
     s0 = float(s_arr[0])
     s_ref, v_ref = route.reference(s0, max(float(x0[3]), 0.0), H, dt)
+    hc = horizon_constants(world, traffic, t, x0, H=H, dt=dt, s_pred=s_ref, memory=memory)
+    # the reference ends with a stop where the plan must stop: the goal (when the route stops
+    # there) and a stop line / red light a rule guards that full braking can still stop before
+    d_brake, v_brake = _braking(float(x0[3]), H, dt, params)
+    s_end = float(route.s[-1]) if route.v_des.size and route.v_des[-1] <= 1e-9 else math.inf
+    if any(stop_rules):
+        lines = stop_lines(hc, stop=stop_rules[0], light=stop_rules[1])
+        s_near = float(min(lines[0], lines[-1]))
+        if s0 + d_brake <= s_near + 1e-6:
+            s_end = min(s_end, max(s_near - stop_margin, s0))
+    if math.isfinite(s_end):
+        s_ref, v_ref = _reference_to(route, s0, max(float(x0[3]), 0.0), H, dt, s_end, stop_decel)
+        hc = replace(hc, s_ref=s_ref, v_max=route.limit_at(s_ref).astype(float))
     v_ref = np.minimum(v_ref, route.limit_at(s_ref))
     pts = route.position(s_ref)
     head = wrap_to(route.heading_at(s_ref), float(x0[2]))
@@ -156,10 +208,27 @@ def prepare_step(
     p_bar = route.position(s_bar)
     v_cap = max(float(route.limit_v.max()) * 1.5, float(x0[3]) + 1.0, params.v_max)
     lo, hi = direction_box(x0, H, dt, params, min(v_cap, params.v_max) if x0[3] <= params.v_max else v_cap)
-    hc = horizon_constants(world, traffic, t, x0, H=H, dt=dt, s_pred=s_ref, memory=memory)
     width = float(route.width_at(s0))
+    # lateral offsets: the drivable band (never narrower than where the ego / the linearisation are)
+    n_bar = np.stack([-np.sin(h_bar), np.cos(h_bar)], axis=1)
+    e_bar = np.einsum("kj,kj->k", n_bar, xs_bar[:, :2] - p_bar)
+    if band:  # never narrower than where the ego already is (so the step stays feasible)
+        b_lo, b_hi = drivable_band(world, s_bar[1:])
+        e_lo = np.minimum(b_lo, e_bar[0] - 0.05)
+        e_hi = np.maximum(b_hi, e_bar[0] + 0.05)
+    else:
+        e_lo, e_hi = np.full(H, -1e4), np.full(H, 1e4)
+    term = TerminalStop()
+    s_line = math.inf
+    if any(stop_rules):
+        s_line = float(stop_lines(hc, stop=stop_rules[0], light=stop_rules[1])[-1])
+    if route.v_des.size and route.v_des[-1] <= 1e-9:  # the route stops at its goal
+        s_line = min(s_line, float(route.s[-1]) + stop_margin)
+    if math.isfinite(s_line):
+        reach = min(max(s_line - stop_margin - s0, 0.5), world.settings.r_near)
+        term = terminal_stop(s_line, s0 + d_brake, v_brake, decel=stop_decel, reach=reach, margin=stop_margin)
     return StepData(t, x0, np.asarray(u_prev, float), xs_bar, us_bar, A, B, c, omega, s_ref, s_bar, h_bar, p_bar,
-                    lo, hi, hc, width)
+                    lo, hi, hc, width, e_lo, e_hi, term)
 
 
 def history_length(history: Mapping[str, np.ndarray] | None, names: set[str], depth: int) -> int:

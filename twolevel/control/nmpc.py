@@ -51,6 +51,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from twolevel.control.codes import MIL515
+from twolevel.control.guards import stop_lines
 from twolevel.control.high_level import MPCSettings, PlanResult, Snapshot, _unpack
 from twolevel.control.horizon import StepData, prepare_step
 from twolevel.control.nmpc_nlp import MODELS, NlpSolution, NmpcProblem
@@ -212,11 +213,7 @@ class NmpcController:
         if self.speed:
             vb = np.maximum(hc.v_max[1:], float(x0[3]) + self.params.a_min * dt * k + 0.05)
         # stop lines: the nearest line that applies at step k (inf: none)
-        s_line = np.full(H, np.inf)
-        if self.stop and math.isfinite(hc.s_stop):
-            s_line = np.minimum(s_line, hc.s_stop)
-        if self.light and math.isfinite(hc.s_light):
-            s_line = np.where(hc.light_red[1:] > 0.5, np.minimum(s_line, hc.s_light), s_line)
+        s_line = stop_lines(hc, stop=self.stop, light=self.light)[1:]  # the high level's definition
         stop = np.tile([0.0, 0.0, 1.0, 0.0], (H, 1))
         decel = self.options.stop_decel or abs(self.params.a_min)
         act = np.isfinite(s_line)

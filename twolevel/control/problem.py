@@ -2,8 +2,12 @@
 
 Columns: ``x`` — the states X, Y, ψ, v for k = 1..H (row-major, 4 per step); ``u`` — the inputs
 δ, a for k = 0..H−1; then the encoder's variables (binaries of disjunctions, auxiliaries).
-Rows: ``dyn`` — x_{k+1} − A_k x_k − B_k u_k = c_k (A_0 x_0 moved to the right-hand side), then the
-rules' rows (``stl``, and ``cf*`` for the vectorised collision_free blocks).
+Rows: ``dyn`` — x_{k+1} − A_k x_k − B_k u_k = c_k (A_0 x_0 moved to the right-hand side);
+``guard`` (:mod:`twolevel.control.guards`) — the lateral offset e_k ≈ n̄_kᵀ(p_k − p̄_k) within the
+drivable band for k = 1..H, and the terminal can-still-stop row
+v_H ≤ κ·(s_line − margin − s_0 − Σ_k dt·(v_k + v_{k+1})/2) + offset on the distance travelled
+(which no sideways motion shortens, and which bounds the route progress from above; ``0·x ≤ 1``
+when no line applies, so the pattern never changes); then the rules' rows (``stl``, and ``cf*`` for the vectorised collision_free blocks).
 
 Cost (paper): Σ_k w_u‖u_k‖² + w_du‖u_k − u_{k−1}‖² + Σ_i w_i (ζ_{k,i} − ω_{k,i})², as residuals.
 
@@ -34,7 +38,7 @@ from twolevel.models.params import BicycleParams
 from twolevel.control.horizon import StepData
 
 __all__ = ["Weights", "Layout", "Assembled", "assemble", "trace_signals", "shape_key", "dynamics_values",
-           "others_of", "set_cost"]
+           "guard_values", "others_of", "set_cost"]
 
 
 @dataclass(frozen=True)
@@ -186,6 +190,34 @@ def _dynamics(b: ModelBuilder, step: StepData, lay: Layout) -> None:
                np.concatenate([v_id.ravel(), v_a.ravel(), v_b.ravel()]), rhs.ravel(), rhs.ravel())
 
 
+def guard_values(step: StepData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The ``guard`` block's triplet values (in :func:`_guards`' order) and row bounds (lo, hi)."""
+    H = step.A.shape[0]
+    h = step.h_bar[1:]
+    n_hat = np.stack([-np.sin(h), np.cos(h)], axis=1)
+    base = np.einsum("kj,kj->k", n_hat, step.p_bar[1:])
+    tm = step.term
+    dt = float(step.hc.t[1] - step.hc.t[0]) if len(step.hc.t) > 1 else 0.1
+    if tm.active:  # v_H + κ·(distance travelled) ≤ κ·(s_line − margin − s_0) + offset
+        w = np.full(H, tm.slope * dt)
+        w[-1] = 1.0 + 0.5 * tm.slope * dt
+        term_hi = tm.slope * (tm.s_line - tm.margin - float(step.s_bar[0]) - 0.5 * dt * float(step.x0[3])) + tm.offset
+    else:
+        w, term_hi = np.zeros(H), 1.0
+    vals = np.concatenate([n_hat.ravel(), w])
+    lo = np.concatenate([step.e_lo + base, [-np.inf]])
+    hi = np.concatenate([step.e_hi + base, [term_hi]])
+    return vals, lo, hi
+
+
+def _guards(b: ModelBuilder, step: StepData, lay: Layout) -> None:
+    H = lay.x.shape[0]
+    rows = np.concatenate([np.repeat(np.arange(H), 2), np.full(H, H)])
+    cols = np.concatenate([lay.x[:, :2].ravel(), lay.x[:, 3]])
+    vals, lo, hi = guard_values(step)
+    b.add_rows("guard", H + 1, rows, cols, vals, lo, hi)
+
+
 @dataclass(frozen=True, eq=False)
 class _CostShape:
     """The parts of the cost that depend only on (H, weights, n): residual matrix, weights, Hessian."""
@@ -299,6 +331,7 @@ def assemble(
                     np.tile([params.delta_max, params.a_max], H))
     lay = Layout(xb.idx.reshape(H, 4), ub.idx.reshape(H, 2), P)
     _dynamics(b, step, lay)
+    _guards(b, step, lay)
     sigs = trace_signals(step, lay, b.n_cols, past, names | {"x", "y"})
     hc = step.hc
     T = P + 1 + H

@@ -28,7 +28,8 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from twolevel.control.horizon import StepData
-from twolevel.control.problem import Assembled, Weights, dynamics_values, others_of, set_cost, trace_signals
+from twolevel.control.problem import (Assembled, Weights, dynamics_values, guard_values, others_of, set_cost,
+                                      trace_signals)
 from twolevel.milp.affine_block import AffineBlock
 from twolevel.milp.collision import CollisionBlock, collision_free_builtin
 from twolevel.milp.encode import AffineSignal, Emission, Encoder, Requirement
@@ -152,6 +153,9 @@ def refresh(tpl: StepTemplate, step: StepData, requirements: Sequence[Requiremen
     vals, rhs = dynamics_values(step)
     m.set_block_values("dyn", vals)
     m.set_row_bounds("dyn", rhs, rhs)
+    gv, glo, ghi = guard_values(step)
+    m.set_block_values("guard", gv)
+    m.set_row_bounds("guard", glo, ghi)
     pat, tv = m.pattern, m.triplet_values
     assert pat is not None and tv is not None
     for e, tvals, lo, bub in writes:
