@@ -90,7 +90,8 @@ class RowMatrix:
 
 
 def _affine(cols: np.ndarray, coefs: np.ndarray, offset: np.ndarray, past: np.ndarray, n: int) -> AffineSignal:
-    """Signal with ``len(past)`` constant samples then one row per step: ``coefs[k] @ x[cols[k]] + offset[k]``."""
+    """Signal with ``len(past)`` constant samples then one row per row of ``cols``:
+    ``coefs[k] @ x[cols[k]] + offset[k]``."""
     H, m = cols.shape
     P = past.size
     indptr = np.concatenate([np.zeros(P + 1, np.int64), m * np.arange(1, H + 1)])
@@ -126,8 +127,10 @@ def trace_signals(step: StepData, lay: Layout, n: int, past: Mapping[str, np.nda
             out[name] = _affine(lay.x[:, i:i + 1], one, np.zeros(H), hist(name, float(x0[i])), n)
         elif name in ("delta", "a"):
             j = 0 if name == "delta" else 1
-            cols = np.concatenate([lay.u[1:, j], lay.u[-1:, j]])[:, None]
-            out[name] = _affine(cols, one, np.zeros(H), hist(name, float(step.u_prev[j])), n)
+            # sample k carries the control applied from k on (twolevel.world.provided): now is u_0,
+            # the last recorded sample u_{-1}; beyond the horizon u_{H-1} is held
+            cols = np.concatenate([lay.u[:, j], lay.u[-1:, j]])[:, None]
+            out[name] = _affine(cols, np.ones((H + 1, 1)), np.zeros(H + 1), hist(name, 0.0)[:-1], n)
         elif name == "s":
             out[name] = _affine(xy, t_hat, s_off, hist("s", s_now), n)
         elif name == "e":

@@ -19,6 +19,12 @@ v_lead        m/s    that vehicle's speed along the route (= v if none)
 min_gap       m      oriented-box separation to the nearest vehicle within r_near (+inf if none)
 n_near        -      number of vehicles within r_near
 ============  =====  ===============================================================
+
+Timing convention (the one place it is stated): sample k of a trace is the state at time k·dt
+and the control applied from k·dt on (held until (k+1)·dt). The simulator's trace and history
+rows, the low level's predictions (sample k = u*_k, the last held) and the MPC's signals (now =
+its decision u_0, the last recorded sample = u_{-1}, the control applied during the last step,
+which is also the u_{-1} of the cost term ‖u_0 − u_{-1}‖²) all follow it.
 """
 
 from __future__ import annotations
