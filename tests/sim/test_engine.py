@@ -212,3 +212,32 @@ def test_trace_signals_equal_the_world_definitions(urban_run) -> None:
                         {k: c[k] for k in ("x", "y", "psi", "v")})
     for name in ("s", "e", "v_max", "d_stop", "light_red", "d_light", "d_lead", "v_lead", "min_gap", "n_near"):
         np.testing.assert_allclose(c[name], ref[name], rtol=0, atol=1e-6, err_msg=name)
+
+
+def test_run_ends_when_the_ego_has_stopped_at_the_goal(tmp_path: Path) -> None:
+    # regression: the reference piled up at the route's end, the ego stopped metres past the goal
+    # and the run idled to its full duration
+    (tmp_path / "street.yaml").write_text(URBAN_MAP)
+    path = tmp_path / "goal.yaml"
+    path.write_text("""
+kind: scenario
+name: goal
+map: street.yaml
+ego: {start: {lane: north, s: 100}, speed: 6.0}
+route: {start: {lane: north, s: 100}, goal: {lane: north, s: 130}}
+rules: []
+controller: {time_limit: 30}
+run: {duration: 30, seed: 0}
+""")
+    summary, diags = simulate_scenario(str(path), str(tmp_path / "run"), monitor=False)
+    assert summary is not None, [d.message for d in diags]
+    assert summary.status == "complete"
+    assert summary.goal_reached_t is not None and summary.goal_reached_t < 15.0
+    assert summary.steps == round(summary.goal_reached_t / 0.1) + 1          # ended there
+    meta = json.loads((tmp_path / "run" / "run.json").read_text())
+    assert meta["summary"]["goal_reached_t"] == summary.goal_reached_t
+    import csv
+
+    with open(tmp_path / "run" / "trace.csv", newline="") as f:
+        last = list(csv.DictReader(f))[-1]
+    assert abs(float(last["s"]) - 30.0) <= 1.0 and float(last["v"]) <= 0.1   # at the goal, not past it

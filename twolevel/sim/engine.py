@@ -30,6 +30,10 @@ rows are written with that delay; when the run ends, is interrupted (Ctrl-C) or 
 remaining rows are completed with the windows truncated at the end (RTAMT's semantics) and
 written before ``run.json`` records the status. Only a killed process loses the last L rows.
 
+**The goal.** On a route that stops at its goal, the run ends at the first step at which the ego
+stands still (speed ≤ the scenario's stop_speed) within :data:`GOAL_ZONE` of the goal or past it;
+the summary (and ``run.json``) records that time as ``goal_reached_t`` [s] (None otherwise).
+
 **Determinism.** Everything but the timing columns (``t_high_ms``, ``t_low_ms``, ``t_step_ms``,
 ``t_plant_ms``) is a function of the scenario and the seed, provided the high level is
 (its time limit can make a plan depend on the machine's speed; the default mode search is
@@ -58,6 +62,7 @@ from twolevel.sim.trace import BASE_COLUMNS, TraceWriter
 __all__ = ["simulate_scenario", "StepInfo", "RunSummary", "Collision", "TIMING_COLUMNS", "SIGNAL_COLUMNS"]
 
 #: Wall-clock columns (excluded from determinism comparisons).
+GOAL_ZONE = 1.0  # [m] how far before the goal a standstill counts as arrived
 TIMING_COLUMNS = ("t_high_ms", "t_low_ms", "t_step_ms", "t_plant_ms")
 #: Signal columns beyond the base ones, named as the rules read them.
 SIGNAL_COLUMNS = ("a", "s", "e", "d_stop", "light_red", "d_light", "d_lead", "v_lead")
@@ -292,6 +297,7 @@ class _Loop:
             decisions=st["decision"], collisions=sorted(self.collisions, key=lambda c: c.t), robustness=rob,
             closest=[Closest(self.world.parts.ids[i], float(self._closest[i]), float(self._closest_t[i]))
                      for i in np.argsort(self._closest, kind="stable")[:5] if np.isfinite(self._closest[i])],
+            goal_reached_t=getattr(self, "goal_reached_t", None),
         )
 
     def _steps(self, progress: Callable[[StepInfo], None] | None, frames: Any) -> None:
@@ -317,6 +323,9 @@ class _Loop:
         rollout(x, np.zeros((1, 1, 2)), dt, p)  # compile the plant step before timing anything
         a_prev, delta_prev = 0.0, 0.0
         recent: deque[float] = deque(maxlen=20)
+        self.goal_reached_t = None
+        stops_at_goal = bool(w.route.v_des.size and w.route.v_des[-1] <= 1e-9)
+        goal_s = float(w.route.s[-1])
         for k in range(steps):
             t = k * dt
             c0 = time.perf_counter()
@@ -379,11 +388,16 @@ class _Loop:
             memory = mem_after
             a_prev, delta_prev = float(accel), float(control[0])
             recent.append(t_step)
+            # the run ends when the ego stands still at the goal (GOAL_ZONE before it or past it)
+            if stops_at_goal and s0 >= goal_s - GOAL_ZONE and abs(v) <= s.stop_speed:
+                self.goal_reached_t = round(t, 9)
             if progress is not None:
                 wall = time.perf_counter() - self.t_wall0
                 progress(StepInfo(k + 1, steps, round((k + 1) * dt, 9), s.duration,
                                   1000.0 * len(recent) / max(sum(recent), 1e-9), t_step, int(now["n_near"]), decision,
                                   (k + 1) * dt / wall if wall > 0 else math.inf))
+            if self.goal_reached_t is not None:
+                break
 
     def hl_depth(self) -> int:
         return max((r.depth for r in getattr(self.hl, "rules", [])), default=0)

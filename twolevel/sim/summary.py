@@ -112,6 +112,7 @@ class RunSummary:
     closest: tuple[Closest, ...] = ()
     decisions: Mapping[str, int] = field(default_factory=dict)
     decisions_by_level: Mapping[str, int] = field(default_factory=dict)
+    goal_reached_t: float | None = None  # [s] when the ego stood still at the goal (the run ends there)
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready dict (infinities as the strings "inf"/"-inf", NaN as null)."""
@@ -140,7 +141,7 @@ def summarise(
     wall_time_s: float, step_ms: Sequence[float], high_ms: Sequence[float], low_ms: Sequence[float],
     tracking: Sequence[float], over_limit: Sequence[float], min_dist: Sequence[float], min_gap: Sequence[float],
     decisions: Sequence[str], collisions: Sequence[Collision], robustness: Mapping[str, np.ndarray],
-    closest: Sequence[Closest] = (), budget_ms: float = 100.0,
+    closest: Sequence[Closest] = (), budget_ms: float = 100.0, goal_reached_t: float | None = None,
 ) -> RunSummary:
     """The summary of the steps recorded so far."""
     st, hi, lo = (np.asarray(a, dtype=float) for a in (step_ms, high_ms, low_ms))
@@ -175,4 +176,5 @@ def summarise(
         min_distance=float(np.min(min_dist)) if len(min_dist) else math.inf,
         min_gap=float(np.min(min_gap)) if len(min_gap) else math.inf,
         collisions=tuple(collisions), violations=tuple(viol), closest=tuple(closest), decisions=counts, decisions_by_level=levels,
+        goal_reached_t=goal_reached_t,
     )
