@@ -261,6 +261,7 @@ def _summary_rows(s) -> list[tuple[str, str]]:  # noqa: ANN001 - RunSummary, imp
         ("status", s.status),
         ("controller", s.controller + ("" if s.monitor else " (no monitor)")),
         ("simulated time", f(s.duration, "s", 4)),
+        ("goal reached at", "-" if s.goal_reached_t is None else f(s.goal_reached_t, "s", 4)),
         ("steps", str(s.steps)),
         ("control step median / p95 / max", f"{s.step_ms_median:.2f} / {s.step_ms_p95:.2f} / {s.step_ms_max:.2f} ms"),
         ("high level median / max", f"{s.high_ms_median:.2f} / {s.high_ms_max:.2f} ms"),
