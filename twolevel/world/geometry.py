@@ -11,6 +11,7 @@ HighwayEnv's lane API: ``lane.position(s, lateral)``, ``lane.local_coordinates(p
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -334,7 +335,47 @@ class Route(Polyline):
 
     def project_near(self, points: np.ndarray, s_center: np.ndarray, half_window: float) -> tuple[np.ndarray, np.ndarray]:
         """Project points (M, 2) [m], each only onto the route within ``s_center`` ± ``half_window``
-        [m] (M,) — a fixed-width gather that stays fast for many points on a long route."""
+        [m] (M,) — a fixed-width search that stays fast for many points on a long route.
+
+        Exact (the nearest interval of the window, the first on ties), found in two passes: the
+        distances to the window's vertices bound every interval's distance (≥ the nearer end's
+        distance − half its length, ≤ either end's distance), and only the intervals whose lower
+        bound does not exceed the smallest upper bound are projected onto."""
+        pts = np.asarray(points, dtype=float).reshape(-1, 2)
+        M = len(pts)
+        n = len(self.s) - 1
+        w = min(int(math.ceil(2 * half_window / self.spacing)) + 2, n)
+        i0 = np.clip(np.floor((np.asarray(s_center, dtype=float) - half_window) / self.spacing).astype(int), 0, n - w)
+        half_len = 0.5 * _max_interval(self)
+        vidx = i0[:, None] + np.arange(w + 1)[None, :]  # (M, W+1) vertex indices
+        dv = np.hypot(self.points[:, 0][vidx] - pts[:, 0:1], self.points[:, 1][vidx] - pts[:, 1:2])
+        ub = dv.min(axis=1, keepdims=True)
+        lb = np.minimum(dv[:, :-1], dv[:, 1:]) - half_len
+        idx = vidx[:, :-1]
+        cand = (lb <= ub + 1e-9) | (idx == 0) | (idx == n - 1)  # end intervals extrapolate: always tried
+        m, k = np.nonzero(cand)
+        i = idx[m, k]
+        a = self.points[i]
+        d = self.points[i + 1] - a
+        l2 = np.einsum("mj,mj->m", d, d)
+        rel = pts[m] - a
+        t_raw = np.einsum("mj,mj->m", rel, d) / np.where(l2 > 0, l2, 1.0)
+        t = np.clip(t_raw, np.where(i == 0, -np.inf, 0.0), np.where(i == n - 1, np.inf, 1.0))
+        diff = rel - t[:, None] * d
+        dist2 = np.full((M, w), np.inf)
+        dist2[m, k] = np.einsum("mj,mj->m", diff, diff)
+        pos = np.full((M, w), -1)
+        pos[m, k] = np.arange(len(m))
+        c = pos[np.arange(M), np.argmin(dist2, axis=1)]  # the chosen candidate of each point
+        i, t, d, rel, l2 = i[c], t[c], d[c], rel[c], l2[c]
+        s = self.s[i] + t * (self.s[i + 1] - self.s[i])
+        cross = d[:, 0] * rel[:, 1] - d[:, 1] * rel[:, 0]
+        return s, cross / np.sqrt(np.where(l2 > 0, l2, 1.0))
+
+    def _project_near_dense(self, points: np.ndarray, s_center: np.ndarray,
+                            half_window: float) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`project_near` onto every interval of each window (the reference the tests
+        compare the pruned search with)."""
         pts = np.asarray(points, dtype=float).reshape(-1, 2)
         n = len(self.s) - 1
         w = min(int(math.ceil(2 * half_window / self.spacing)) + 2, n)
@@ -366,6 +407,19 @@ class Route(Polyline):
             v[k + 1] = min(max(target, v[k] - a_max * dt), v[k] + a_max * dt)
             s[k + 1] = min(s[k] + 0.5 * (v[k] + v[k + 1]) * dt, self.s[-1])
         return s, v
+
+
+_INTERVALS: "weakref.WeakKeyDictionary[Polyline, float]" = weakref.WeakKeyDictionary()
+
+
+def _max_interval(line: Polyline) -> float:
+    """The longest interval of a polyline [m] (computed once per line)."""
+    got = _INTERVALS.get(line)
+    if got is None:
+        seg = np.diff(line.points, axis=0)
+        got = float(np.max(np.hypot(seg[:, 0], seg[:, 1]), initial=0.0))
+        _INTERVALS[line] = got
+    return got
 
 
 def resample(line: Polyline, spacing: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
