@@ -51,6 +51,7 @@ from twolevel.control.problem import Assembled, Weights, assemble, shape_key
 from twolevel.control.template import TemplateCache, refresh, template_of
 from twolevel.diagnostics import Diagnostic, Span
 from twolevel.milp.encode import Requirement
+from twolevel.milp.highs import Status
 from twolevel.milp.model import PatternCache
 from twolevel.milp.modes import ModeSearch
 from twolevel.milp.qp import FixedModeQP
@@ -303,21 +304,56 @@ class HighLevelController:
     def _recover_later(self, res: PlanResult, asm: Assembled, step: StepData, past: Mapping[str, np.ndarray], P: int,
                        tm: dict[str, float], t0: float) -> tuple[PlanResult, Assembled]:
         """A rule violated now was required from a step the solver still finds infeasible: require
-        it one step later each time until a plan exists (within the time limit)."""
+        it later. The extra shift j (the same for every recovering rule) is found by a binary
+        search on the feasibility of the step's relaxation (every disjunction undecided, one QP
+        per probe; requiring a rule later never adds constraints, so feasibility is monotone in
+        j), then the full solve at the first relaxation-feasible j, then one step later at a time
+        while the mode search still finds no plan (within the time limit)."""
         from twolevel.control.solve import solve_step
 
-        after: dict[str, int] = {}
         lim = self.settings.time_limit
         if not res.ok and not asm.encoding.recovered and self._recover_at:
             # the hinted start did not help (the rule may no longer be violated): plain build
             self._recover_at = {}
-        while not res.ok and res.status != "time_limit" and asm.encoding.recovered and (
-                lim is None or time.perf_counter() - t0 < lim):
-            for n, t, t2 in asm.encoding.recovered:
-                after[n] = t2 - t
-            asm = self.build(step, past, P, recover_after=after)
+        if res.ok or res.status == "time_limit" or not asm.encoding.recovered:
+            return res, asm
+        base = {n: t2 - t for n, t, t2 in asm.encoding.recovered}
+        T = P + self.settings.H + 1  # trace length: a start step is at most T − 1
+        j_max = min(T - 1 - t2 for _, _, t2 in asm.encoding.recovered)
+        built: dict[int, Assembled] = {}
+        probes = 0
+
+        def in_time() -> bool:
+            return lim is None or time.perf_counter() - t0 < lim
+
+        def at(j: int) -> Assembled:  # search from start + j on (``after`` = offset + j − 1)
+            if j not in built:
+                built[j] = self.build(step, past, P, recover_after={n: b + j - 1 for n, b in base.items()})
+            return built[j]
+
+        def relaxed_feasible(j: int) -> bool:
+            nonlocal probes
+            a = at(j)
+            if a.encoding.infeasible or any(d.is_error for d in a.diagnostics):
+                return False
+            qp, ms = self._backend(a)
+            x_int, disable = ms.to_int(np.full(ms.D, -1, np.int64))
+            probes += 1
+            return qp.solve(x_int, disable=disable).status is Status.OPTIMAL
+
+        lo, hi = 1, j_max + 1  # first relaxation-feasible j in [lo, hi); hi = none
+        while lo < hi and in_time():
+            mid = (lo + hi) // 2
+            if relaxed_feasible(mid):
+                hi = mid
+            else:
+                lo = mid + 1
+        j = lo
+        while j <= j_max and not res.ok and res.status != "time_limit" and in_time():
+            asm = at(j)
             res = solve_step(self, step, asm, tm, t0)
-        return res, asm
+            j += 1
+        return (replace(res, qps=res.qps + probes) if probes else res), asm
 
     def solve(self, ego_state: Sequence[float], t: float, world_state: TrafficState | Snapshot | None = None,
               history: Mapping[str, np.ndarray] | None = None) -> PlanResult:
