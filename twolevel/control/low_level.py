@@ -40,6 +40,19 @@ space of the paper's CARLA controls, where r = 0.3), clipped to the actuator lim
 is seeded per step from the run's seed (``numpy.random.default_rng((seed, step))``) and runs in
 rounds (32, 64, then the rest of the budget) so the usual case costs one small batch.
 
+**Screening on a prefix** (``screen`` = j > 0, exact). When every rule is *prefix-bounded* —
+built from pointwise predicates, past operators, ``and``/``or``, ``always`` and ``next`` (no
+``eventually``/``until``/``unless`` and no negation above a future operator;
+:func:`prefix_bounded`) — its robustness at k = 1 on the trace cut after the predicted sample j
+is an upper bound of its robustness on the whole prediction (``always`` over fewer samples, each
+signal at k ≤ j the same: the rollout and the signals are causal). So each round first rolls
+every candidate out over j steps only and drops those a rule already rejects there; the
+survivors are continued from their state at j (bit-identical to rolling out the whole horizon)
+and judged in full. Which candidate is chosen, its robustness and the count of candidates tried
+do not change; an intervention where nothing satisfies (the full brake) costs about j / H of
+the rollouts instead of all of them. Not used when the car is (almost) standing and the
+least-violating choice is enabled: that compares the full robustness of every candidate.
+
 **Cost of a candidate** (lower is better): Σ_{k=1..H} ‖p_k − p̂_k‖² + (v_k − v̂_k)² — the
 distance of its detailed trajectory from the MPC's planned one (p̂, v̂: ``target``; the plan
 already trades tracking of the waypoints against the rules) — plus ‖offset‖² in the normalised
@@ -59,13 +72,14 @@ from twolevel.control.batch_monitor import evaluate_rules_batch
 from twolevel.control.sensing import Memory, Others, others_predicted, sense
 from twolevel.models.actuation import accel_from_gamma, gamma_from_accel
 from twolevel.models.params import VehicleParams
-from twolevel.models.rollout import Backend, rollout, rollout_accel
+from twolevel.models.obb import box_corners
+from twolevel.models.rollout import Backend, Rollout, rollout, rollout_accel
 from twolevel.stl import analysis, ast
 from twolevel.stl.typecheck import RuleSet
 from twolevel.world.traffic import TrafficState
 from twolevel.world.world import World
 
-__all__ = ["LowLevelSettings", "Decision", "LowLevelController", "RuleCheck", "MAX_PAST"]
+__all__ = ["LowLevelSettings", "Decision", "LowLevelController", "RuleCheck", "MAX_PAST", "prefix_bounded"]
 
 STANDING = 1.0
 """Below this speed [m/s] braking changes little, so a least-violating choice may replace it."""
@@ -81,7 +95,9 @@ class LowLevelSettings:
     budget is spent); ``seed``: the run's seed; ``delta_max`` [rad]: steering limit;
     ``backend``: rollout backend (:mod:`twolevel.models.rollout`); ``least_violation``: when
     nothing satisfies, do not brake if braking violates the rules worse than u* or a sampled
-    candidate (see the module docstring); False is the paper's plain rule."""
+    candidate (see the module docstring); False is the paper's plain rule; ``screen``: steps
+    [-] of the prefix on which candidates are screened before their full rollout (0: off; see
+    the module docstring; it never changes the decision)."""
 
     r: float = 0.3
     samples: int = 200
@@ -90,6 +106,7 @@ class LowLevelSettings:
     delta_max: float = 0.5
     backend: Backend = "auto"
     least_violation: bool = True
+    screen: int = 3
 
     def round_sizes(self) -> list[int]:
         """Candidates per round, summing to ``samples``."""
@@ -171,6 +188,8 @@ class LowLevelController:
         self.dt = world.settings.dt
         self.past = max((r.past for r in self.rules), default=0)
         self._reads_a = any("a" in analysis.signals_read(r.formula) for r in self.rules)
+        self._screen = (0 < self.settings.screen < self.H and bool(self.rules)
+                        and all(prefix_bounded(r.formula) for r in self.rules))
 
     @classmethod
     def from_rulesets(cls, world: World, rulesets: Sequence[RuleSet], **kw: object) -> "LowLevelController":
@@ -184,6 +203,8 @@ class LowLevelController:
         rollout_accel(x0, u, self.dt, self.params, self.settings.backend)
         for k in set(self.settings.round_sizes()):
             rollout(x0, np.zeros((k, self.H, 2)), self.dt, self.params, self.settings.backend)
+            if self._screen:
+                rollout(x0, np.zeros((k, self.settings.screen, 2)), self.dt, self.params, self.settings.backend)
 
     # ------------------------------------------------------------------ evaluation
     def _signals(self, states: np.ndarray, accel: np.ndarray, delta: np.ndarray, t: float, memory: Memory,
@@ -277,6 +298,7 @@ class LowLevelController:
             best = (min(mpc_rob.values()), np.array([u_star[0, 0], gamma_star[0]]), float(u_star[0, 1]), mpc_rob,
                     ro.states[0])
         base = np.stack([u_star[:, 0] / st.delta_max, gamma_star], axis=1)  # (H, 2) normalised
+        screen = self._screen and not (st.least_violation and abs(v_now) < STANDING)
         for k in st.round_sizes():
             radius = st.r * np.sqrt(rng.random(k))
             angle = 2 * np.pi * rng.random(k)
@@ -284,12 +306,21 @@ class LowLevelController:
             cand = base[None] + offset[:, None, :]
             cand[..., 0] = np.clip(cand[..., 0], -1.0, 1.0) * st.delta_max
             cand[..., 1] = np.clip(cand[..., 1], -1.0, 1.0)
+            tried += k
+            if screen:
+                keep = self._screened(x0, cand, t, memory, others, s0, hist, P, tm)
+                if not keep.any():
+                    continue  # every candidate already violates a rule on the prefix
+                cand, offset = cand[keep], offset[keep]
+                k = len(cand)
+                continued, screen = True, not keep.all()  # screen the next rounds while it prunes
+            else:
+                continued = False
             t0 = time.perf_counter()
-            rc = rollout(x0, cand, dt, p, st.backend)
+            rc = self._continued(cand) if continued else rollout(x0, cand, dt, p, st.backend)
             tm["rollout"] += (time.perf_counter() - t0) * 1e3
             accel = self._accel(cand[..., 1], rc.states)
             rob = judge(rc.states, accel, cand[..., 0])
-            tried += k
             ok = np.all(np.stack([v >= 0 for v in rob.values()]), axis=0) if rob else np.ones(k, dtype=bool)
             if rob and not ok.any():
                 worst = np.min(np.stack(list(rob.values())), axis=0)
@@ -317,6 +348,41 @@ class LowLevelController:
             return self._done("least_violation", best[1], best[2], tried, best[3], mpc_rob, best[4], tm, t_start)
         return self._done("brake", brake[0].copy(), a0, tried, brake_rob, mpc_rob, rb.states[0], tm, t_start)
 
+    def _screened(self, x0: np.ndarray, cand: np.ndarray, t: float, memory: Memory, others: Others, s0: float,
+                  hist: Mapping[str, np.ndarray], P: int, tm: dict[str, float]) -> np.ndarray:
+        """Which candidates (K, H, 2) [δ rad, γ] no rule rejects on the prediction cut after
+        sample j = ``screen`` (an upper bound of each rule's robustness; see the module
+        docstring). Keeps their prefix rollout for :meth:`_continued`."""
+        j, p = self.settings.screen, self.params
+        t0 = time.perf_counter()
+        pre = rollout(x0, cand[:, :j], self.dt, p, self.settings.backend).states  # (K, j+1, 12)
+        t1 = time.perf_counter()
+        tm["rollout"] = tm.get("rollout", 0.0) + (t1 - t0) * 1e3
+        # inputs per sample k = 0..j, as the full judgement sees them there (sample k carries
+        # the input applied from k on)
+        delta = cand[:, : j + 1, 0]
+        if self._reads_a:
+            accel = accel_from_gamma(cand[:, : j + 1, 1], np.maximum(pre[:, :, 3], 0.0), p)
+        else:
+            accel = np.zeros_like(delta)  # no rule reads it
+        sig = self._signals(pre, accel, delta, t, memory, _cut(others, j + 1), s0, hist, P)
+        t2 = time.perf_counter()
+        rob = self.evaluate(sig, P)
+        tm["signals"] = tm.get("signals", 0.0) + (t2 - t1) * 1e3
+        tm["monitor"] = tm.get("monitor", 0.0) + (time.perf_counter() - t2) * 1e3
+        keep = ~np.any(np.stack([v < 0 for v in rob.values()]), axis=0)
+        self._prefix = pre[keep]
+        return keep
+
+    def _continued(self, cand: np.ndarray) -> Rollout:
+        """The full rollout of the screened candidates: their prefix continued from sample j."""
+        j = self.settings.screen
+        rest = rollout(self._prefix[:, -1], cand[:, j:], self.dt, self.params, self.settings.backend)
+        states = np.concatenate([self._prefix, rest.states[:, 1:]], axis=1)
+        boxes = np.concatenate([box_corners(self._prefix[..., 0], self._prefix[..., 1], self._prefix[..., 2],
+                                            self.params.length, self.params.width), rest.boxes[:, 1:]], axis=1)
+        return Rollout(states=states, boxes=boxes)
+
     def _done(self, decision: str, control: np.ndarray, accel: float, tried: int, rob: dict[str, float],
               mpc_rob: dict[str, float], states: np.ndarray, tm: dict[str, float], t_start: float) -> Decision:
         tm["total"] = (time.perf_counter() - t_start) * 1e3
@@ -325,6 +391,49 @@ class LowLevelController:
 
 _SIGNALS = ("x", "y", "psi", "v", "a", "delta", "s", "e", "v_max", "d_stop", "light_red", "d_light", "d_lead",
             "v_lead", "min_gap", "n_near")
+
+
+_POINTWISE_CALLS = frozenset({"collision_free"})
+"""Built-in predicates whose value at a sample depends on the signals at that sample only."""
+
+
+def _causal(node: ast.Node) -> bool:
+    """No future operator and no built-in that could look beyond the sample: the value at k
+    depends on samples ≤ k only."""
+    for n in node.walk():
+        if isinstance(n, ast.Temporal) and n.op in ("always", "eventually", "next"):
+            return False
+        if isinstance(n, ast.BinTemporal) and n.op != "since":
+            return False
+        if isinstance(n, ast.Call) and n.name not in _POINTWISE_CALLS:
+            return False
+    return True
+
+
+def prefix_bounded(node: ast.Node) -> bool:
+    """Whether a formula's robustness at any sample of a trace cut short is ≥ its robustness on
+    the whole trace (windows truncated at the end, RTAMT's offline semantics): causal formulas,
+    and ``and``/``or``/``always``/``next``/past operators over prefix-bounded operands
+    (``implies`` with a causal antecedent). Conservative: False when unsure."""
+    if _causal(node):
+        return True
+    if isinstance(node, ast.Binary):
+        if node.op in ("and", "or"):
+            return prefix_bounded(node.left) and prefix_bounded(node.right)
+        if node.op == "implies":
+            return _causal(node.left) and prefix_bounded(node.right)
+        return False
+    if isinstance(node, ast.Temporal):
+        return node.op in ("always", "next", "historically", "once", "prev") and prefix_bounded(node.operand)
+    if isinstance(node, ast.BinTemporal):
+        return node.op == "since" and prefix_bounded(node.left) and prefix_bounded(node.right)
+    return False
+
+
+def _cut(others: Others, T: int) -> Others:
+    """The other vehicles over the first T samples."""
+    return Others(others.x[:, :T], others.y[:, :T], others.psi[:, :T], others.v[:, :T], others.s[:, :T],
+                  others.e[:, :T], others.length, others.width, others.index)
 
 
 def _extend(u: np.ndarray) -> np.ndarray:
