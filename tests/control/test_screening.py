@@ -49,31 +49,34 @@ GAP = "input float min_gap\ninput float v\nsafe = always[0:1] collision_free(1.0
 BOTH = GAP + "input float v_max\nspeed = always[0:1] (v <= v_max + 0.5);\n"
 
 
-def _pair(w, rs, v: float, u: np.ndarray, *, samples: int = 200, step: int = 0, y: float = 0.0):  # noqa: ANN001
+def _pair(w, rs, v: float, u: np.ndarray, *, samples: int = 200, step: int = 0, y: float = 0.0,
+          psi: float | None = None):  # noqa: ANN001
     out = []
-    for screen in (0, 3):
+    for screen in ((), (3,), (3, 6), (2, 5, 8)):
         ll = LowLevelController.from_rulesets(w, [rs], settings=LowLevelSettings(samples=samples, seed=7, screen=screen))
-        x0 = fw.initial_state(w.ego.x, w.ego.y + y, w.ego.psi, v)
+        x0 = fw.initial_state(w.ego.x, w.ego.y + y, w.ego.psi if psi is None else psi, v)
         out.append((ll, ll.decide(x0, u, 0.0, w.traffic0, Memory.fresh(w), 20.0, None, step=step)))
-    (off_ll, off), (on_ll, on) = out
-    assert not off_ll._screen and on_ll._screen
-    assert on.decision == off.decision and on.candidates == off.candidates
-    np.testing.assert_array_equal(on.control, off.control)
-    np.testing.assert_array_equal(on.states, off.states)
-    assert on.robustness == off.robustness and on.mpc_robustness == off.mpc_robustness
+    (off_ll, off), *screened = out
+    assert not off_ll._screen
+    for on_ll, on in screened:
+        assert on_ll._screen
+        assert on.decision == off.decision and on.candidates == off.candidates
+        np.testing.assert_array_equal(on.control, off.control)
+        np.testing.assert_array_equal(on.states, off.states)
+        assert on.robustness == off.robustness and on.mpc_robustness == off.mpc_robustness
     return on
 
 
 @pytest.fixture
 def kept(monkeypatch: pytest.MonkeyPatch) -> list[tuple[int, int]]:
-    """(survivors, candidates) of every screened round."""
+    """(survivors, candidates) of every screened round (of every screening setting tried)."""
     out: list[tuple[int, int]] = []
     orig = LowLevelController._screened
 
     def spy(self, *a, **k):  # noqa: ANN001, ANN002, ANN003, ANN202
-        keep = orig(self, *a, **k)
+        keep, pruned, bound = orig(self, *a, **k)
         out.append((int(keep.sum()), len(keep)))
-        return keep
+        return keep, pruned, bound
 
     monkeypatch.setattr(LowLevelController, "_screened", spy)
     return out
@@ -84,7 +87,7 @@ def test_everything_pruned_brakes_as_without_screening(tmp_path: Path, kept: lis
     w, rs = _world(tmp_path, GAP, "{id: stalled, behaviour: stationary, start: {lane: middle, s: 26}}")
     d = _pair(w, rs, 15.0, np.tile([0.0, -2.0], (10, 1)))
     assert d.decision == "brake" and d.candidates == 200
-    assert kept == [(0, 32), (0, 64), (0, 104)]
+    assert kept == [(0, 32), (0, 64), (0, 104)] * 3
 
 
 def test_late_violation_stops_screening_and_brakes_the_same(tmp_path: Path, kept: list) -> None:
@@ -92,7 +95,7 @@ def test_late_violation_stops_screening_and_brakes_the_same(tmp_path: Path, kept
     # the later rounds are not screened
     w, rs = _world(tmp_path, BOTH, "{id: stalled, behaviour: stationary, start: {lane: middle, s: 28}}")
     d = _pair(w, rs, 6.0, np.tile([0.0, 0.0], (10, 1)))
-    assert d.decision == "brake" and kept == [(32, 32)]
+    assert d.decision == "brake" and kept[0] == (32, 32)
 
 
 @pytest.mark.parametrize("v, a", [(30.3, 1.0), (30.2, 0.5), (30.0, 1.5)])
@@ -120,3 +123,15 @@ def test_partly_pruned_round_samples_the_same(tmp_path: Path, kept: list, v: flo
 ])
 def test_prefix_bounded(text: str, bounded: bool) -> None:
     assert prefix_bounded(parse_formula(text)) is bounded
+
+
+def test_standing_least_violating_choice_is_the_same(tmp_path: Path, kept: list) -> None:
+    # stopped half across the lane marking while the next lane's traffic closes in from behind:
+    # the least-violating choice compares every candidate's worst robustness; dropped candidates
+    # whose prefix bound could beat the best are judged in full
+    w, rs = _world(tmp_path, GAP, "{id: passing, behaviour: constant_velocity, start: {lane: left, s: 14}, speed: 14}")
+    for samples in (40, 200):
+        kept.clear()
+        d = _pair(w, rs, 0.0, np.tile([-0.4, 2.0], (10, 1)), samples=samples, y=1.5, psi=0.15)
+        assert d.decision == "least_violation"
+        assert any(n < k for n, k in kept)  # screening dropped some

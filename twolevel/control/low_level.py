@@ -40,7 +40,7 @@ space of the paper's CARLA controls, where r = 0.3), clipped to the actuator lim
 is seeded per step from the run's seed (``numpy.random.default_rng((seed, step))``) and runs in
 rounds (32, 64, then the rest of the budget) so the usual case costs one small batch.
 
-**Screening on a prefix** (``screen`` = j > 0, exact). When every rule is *prefix-bounded* —
+**Screening on prefixes** (``screen`` = cuts j, default 3 then 6 steps; exact). When every rule is *prefix-bounded* —
 built from pointwise predicates, past operators, ``and``/``or``, ``always`` and ``next`` (no
 ``eventually``/``until``/``unless`` and no negation above a future operator;
 :func:`prefix_bounded`) — its robustness at k = 1 on the trace cut after the predicted sample j
@@ -50,8 +50,10 @@ every candidate out over j steps only and drops those a rule already rejects the
 survivors are continued from their state at j (bit-identical to rolling out the whole horizon)
 and judged in full. Which candidate is chosen, its robustness and the count of candidates tried
 do not change; an intervention where nothing satisfies (the full brake) costs about j / H of
-the rollouts instead of all of them. Not used when the car is (almost) standing and the
-least-violating choice is enabled: that compares the full robustness of every candidate.
+the rollouts instead of all of them, for one more signals and monitor pass per cut. When the car is (almost) standing and the least-violating
+choice is enabled, that choice needs the exact worst robustness of the best candidate: a dropped
+candidate whose prefix bound reaches the best known is judged in full as well (branch and
+bound; the others cannot be chosen).
 
 **Cost of a candidate** (lower is better): Σ_{k=1..H} ‖p_k − p̂_k‖² + (v_k − v̂_k)² — the
 distance of its detailed trajectory from the MPC's planned one (p̂, v̂: ``target``; the plan
@@ -95,9 +97,9 @@ class LowLevelSettings:
     budget is spent); ``seed``: the run's seed; ``delta_max`` [rad]: steering limit;
     ``backend``: rollout backend (:mod:`twolevel.models.rollout`); ``least_violation``: when
     nothing satisfies, do not brake if braking violates the rules worse than u* or a sampled
-    candidate (see the module docstring); False is the paper's plain rule; ``screen``: steps
-    [-] of the prefix on which candidates are screened before their full rollout (0: off; see
-    the module docstring; it never changes the decision)."""
+    candidate (see the module docstring); False is the paper's plain rule; ``screen``: the cuts j
+    [steps] of the prediction on whose prefixes candidates are screened, in turn, before their
+    full rollout (empty: off; see the module docstring; it never changes the decision)."""
 
     r: float = 0.3
     samples: int = 200
@@ -106,7 +108,7 @@ class LowLevelSettings:
     delta_max: float = 0.5
     backend: Backend = "auto"
     least_violation: bool = True
-    screen: int = 3
+    screen: tuple[int, ...] = (3, 6)
 
     def round_sizes(self) -> list[int]:
         """Candidates per round, summing to ``samples``."""
@@ -188,8 +190,8 @@ class LowLevelController:
         self.dt = world.settings.dt
         self.past = max((r.past for r in self.rules), default=0)
         self._reads_a = any("a" in analysis.signals_read(r.formula) for r in self.rules)
-        self._screen = (0 < self.settings.screen < self.H and bool(self.rules)
-                        and all(prefix_bounded(r.formula) for r in self.rules))
+        self._cuts = tuple(sorted({j for j in self.settings.screen if 0 < j < self.H}))
+        self._screen = bool(self._cuts) and bool(self.rules) and all(prefix_bounded(r.formula) for r in self.rules)
 
     @classmethod
     def from_rulesets(cls, world: World, rulesets: Sequence[RuleSet], **kw: object) -> "LowLevelController":
@@ -204,7 +206,7 @@ class LowLevelController:
         for k in set(self.settings.round_sizes()):
             rollout(x0, np.zeros((k, self.H, 2)), self.dt, self.params, self.settings.backend)
             if self._screen:
-                rollout(x0, np.zeros((k, self.settings.screen, 2)), self.dt, self.params, self.settings.backend)
+                rollout(x0, np.zeros((k, self._cuts[0], 2)), self.dt, self.params, self.settings.backend)
 
     # ------------------------------------------------------------------ evaluation
     def _signals(self, states: np.ndarray, accel: np.ndarray, delta: np.ndarray, t: float, memory: Memory,
@@ -298,7 +300,8 @@ class LowLevelController:
             best = (min(mpc_rob.values()), np.array([u_star[0, 0], gamma_star[0]]), float(u_star[0, 1]), mpc_rob,
                     ro.states[0])
         base = np.stack([u_star[:, 0] / st.delta_max, gamma_star], axis=1)  # (H, 2) normalised
-        screen = self._screen and not (st.least_violation and abs(v_now) < STANDING)
+        screen = self._screen
+        exact_worst = st.least_violation and abs(v_now) < STANDING  # the least-violating choice needs it
         for k in st.round_sizes():
             radius = st.r * np.sqrt(rng.random(k))
             angle = 2 * np.pi * rng.random(k)
@@ -307,33 +310,51 @@ class LowLevelController:
             cand[..., 0] = np.clip(cand[..., 0], -1.0, 1.0) * st.delta_max
             cand[..., 1] = np.clip(cand[..., 1], -1.0, 1.0)
             tried += k
+            bound = None
             if screen:
-                keep = self._screened(x0, cand, t, memory, others, s0, hist, P, tm)
-                if not keep.any():
-                    continue  # every candidate already violates a rule on the prefix
-                cand, offset = cand[keep], offset[keep]
-                k = len(cand)
-                continued, screen = True, not keep.all()  # screen the next rounds while it prunes
+                keep, screen, bound = self._screened(x0, cand, t, memory, others, s0, hist, P, tm)
+                # (the next rounds of this step are screened while it prunes)
+                idx = np.flatnonzero(keep)
+                t0 = time.perf_counter()
+                states = self._continued(cand[idx]).states if len(idx) else np.zeros((0, H + 1, x0.shape[0]))
+                tm["rollout"] += (time.perf_counter() - t0) * 1e3
             else:
-                continued = False
-            t0 = time.perf_counter()
-            rc = self._continued(cand) if continued else rollout(x0, cand, dt, p, st.backend)
-            tm["rollout"] += (time.perf_counter() - t0) * 1e3
-            accel = self._accel(cand[..., 1], rc.states)
-            rob = judge(rc.states, accel, cand[..., 0])
-            ok = np.all(np.stack([v >= 0 for v in rob.values()]), axis=0) if rob else np.ones(k, dtype=bool)
-            if rob and not ok.any():
-                worst = np.min(np.stack(list(rob.values())), axis=0)
+                idx = np.arange(k)
+                t0 = time.perf_counter()
+                states = rollout(x0, cand, dt, p, st.backend).states
+                tm["rollout"] += (time.perf_counter() - t0) * 1e3
+            rob = judge(states, self._accel(cand[idx, :, 1], states), cand[idx, :, 0]) if len(idx) else {}
+            ok = np.all(np.stack([v >= 0 for v in rob.values()]), axis=0) if rob else np.zeros(len(idx), dtype=bool)
+            if ok.any():
+                cost = np.where(ok, self._cost(states, target, offset[idx]), np.inf)
+                j = int(np.argmin(cost))
+                c = idx[j]
+                a0 = float(accel_from_gamma(cand[c, 0, 1], max(float(x0[3]), 0.0), p))
+                return self._done("sampled", cand[c, 0].copy(), a0, tried,
+                                  {n: float(v[j]) for n, v in rob.items()}, mpc_rob, states[j], tm, t_start)
+            worst = np.min(np.stack(list(rob.values())), axis=0) if rob else np.zeros(0)
+            if bound is not None and exact_worst:
+                # a dropped candidate can only be the least violating if its prefix bound reaches
+                # the best worst robustness known: judge those in full too (NaN: judge)
+                tau = max(best[0] if best is not None else -np.inf,
+                          float(np.max(worst[~np.isnan(worst)], initial=-np.inf)))
+                extra = np.flatnonzero(~keep & ~(bound < tau))
+                if len(extra):
+                    t0 = time.perf_counter()
+                    more = rollout(x0, cand[extra], dt, p, st.backend).states
+                    tm["rollout"] += (time.perf_counter() - t0) * 1e3
+                    rob_e = judge(more, self._accel(cand[extra, :, 1], more), cand[extra, :, 0])
+                    order = np.argsort(np.concatenate([idx, extra]), kind="stable")
+                    idx = np.concatenate([idx, extra])[order]
+                    states = np.concatenate([states, more])[order]
+                    rob = {n: (np.concatenate([rob[n], v]) if rob else v)[order] for n, v in rob_e.items()}
+                    worst = np.min(np.stack(list(rob.values())), axis=0)
+            if len(idx) and (bound is None or exact_worst):
                 j = int(np.argmax(worst))
                 if best is None or worst[j] > best[0]:
-                    a0 = float(accel_from_gamma(cand[j, 0, 1], max(float(x0[3]), 0.0), p))
-                    best = (float(worst[j]), cand[j, 0].copy(), a0, {n: float(v[j]) for n, v in rob.items()}, rc.states[j])
-            if ok.any():
-                cost = np.where(ok, self._cost(rc.states, target, offset), np.inf)
-                j = int(np.argmin(cost))
-                a0 = float(accel_from_gamma(cand[j, 0, 1], max(float(x0[3]), 0.0), p))
-                return self._done("sampled", cand[j, 0].copy(), a0, tried,
-                                  {n: float(v[j]) for n, v in rob.items()}, mpc_rob, rc.states[j], tm, t_start)
+                    c = idx[j]
+                    a0 = float(accel_from_gamma(cand[c, 0, 1], max(float(x0[3]), 0.0), p))
+                    best = (float(worst[j]), cand[c, 0].copy(), a0, {n: float(v[j]) for n, v in rob.items()}, states[j])
 
         brake = np.stack([u_star[:, 0], -np.ones(H)], axis=1)
         t0 = time.perf_counter()
@@ -349,38 +370,54 @@ class LowLevelController:
         return self._done("brake", brake[0].copy(), a0, tried, brake_rob, mpc_rob, rb.states[0], tm, t_start)
 
     def _screened(self, x0: np.ndarray, cand: np.ndarray, t: float, memory: Memory, others: Others, s0: float,
-                  hist: Mapping[str, np.ndarray], P: int, tm: dict[str, float]) -> np.ndarray:
+                  hist: Mapping[str, np.ndarray], P: int,
+                  tm: dict[str, float]) -> tuple[np.ndarray, bool, np.ndarray]:
         """Which candidates (K, H, 2) [δ rad, γ] no rule rejects on the prediction cut after
-        sample j = ``screen`` (an upper bound of each rule's robustness; see the module
-        docstring). Keeps their prefix rollout for :meth:`_continued`."""
-        j, p = self.settings.screen, self.params
-        t0 = time.perf_counter()
-        pre = rollout(x0, cand[:, :j], self.dt, p, self.settings.backend).states  # (K, j+1, 12)
-        t1 = time.perf_counter()
-        tm["rollout"] = tm.get("rollout", 0.0) + (t1 - t0) * 1e3
-        # inputs per sample k = 0..j, as the full judgement sees them there (sample k carries
-        # the input applied from k on)
-        delta = cand[:, : j + 1, 0]
-        if self._reads_a:
-            accel = accel_from_gamma(cand[:, : j + 1, 1], np.maximum(pre[:, :, 3], 0.0), p)
-        else:
-            accel = np.zeros_like(delta)  # no rule reads it
-        sig = self._signals(pre, accel, delta, t, memory, _cut(others, j + 1), s0, hist, P)
-        t2 = time.perf_counter()
-        rob = self.evaluate(sig, P)
-        tm["signals"] = tm.get("signals", 0.0) + (t2 - t1) * 1e3
-        tm["monitor"] = tm.get("monitor", 0.0) + (time.perf_counter() - t2) * 1e3
-        keep = ~np.any(np.stack([v < 0 for v in rob.values()]), axis=0)
-        self._prefix = pre[keep]
-        return keep
+        each of the ``screen`` samples in turn (an upper bound of each rule's robustness; see
+        the module docstring), whether any was dropped, and for each dropped one the bound of
+        its worst rule robustness (K,) (+inf for the kept). Keeps the survivors' rollout up to
+        the last cut for :meth:`_continued`."""
+        p = self.params
+        keep = np.ones(len(cand), dtype=bool)
+        bound = np.full(len(cand), np.inf)
+        states = np.asarray(x0, dtype=float)[None, None, :].repeat(len(cand), axis=0)  # (K, 1, 12)
+        done = 0
+        for j in self._cuts:
+            live = np.flatnonzero(keep)
+            t0 = time.perf_counter()
+            more = rollout(states[:, -1], cand[live, done:j], self.dt, p, self.settings.backend).states
+            states = np.concatenate([states, more[:, 1:]], axis=1)  # (live, j+1, 12)
+            t1 = time.perf_counter()
+            tm["rollout"] = tm.get("rollout", 0.0) + (t1 - t0) * 1e3
+            # inputs per sample k = 0..j as the full judgement sees them (sample k carries the
+            # input applied from k on)
+            delta = cand[live, : j + 1, 0]
+            if self._reads_a:
+                accel = accel_from_gamma(cand[live, : j + 1, 1], np.maximum(states[:, :, 3], 0.0), p)
+            else:
+                accel = np.zeros_like(delta)  # no rule reads it
+            sig = self._signals(states, accel, delta, t, memory, _cut(others, j + 1), s0, hist, P)
+            t2 = time.perf_counter()
+            rob = self.evaluate(sig, P)
+            tm["signals"] = tm.get("signals", 0.0) + (t2 - t1) * 1e3
+            tm["monitor"] = tm.get("monitor", 0.0) + (time.perf_counter() - t2) * 1e3
+            table = np.stack(list(rob.values()))
+            ok = ~np.any(table < 0, axis=0)
+            keep[live[~ok]] = False
+            bound[live[~ok]] = np.min(table[:, ~ok], axis=0)
+            states, done = states[ok], j
+            if not keep.any():
+                break
+        self._prefix, self._done_steps = states, done
+        return keep, not keep.all(), bound
 
     def _continued(self, cand: np.ndarray) -> Rollout:
-        """The full rollout of the screened candidates: their prefix continued from sample j."""
-        j = self.settings.screen
-        rest = rollout(self._prefix[:, -1], cand[:, j:], self.dt, self.params, self.settings.backend)
-        states = np.concatenate([self._prefix, rest.states[:, 1:]], axis=1)
-        boxes = np.concatenate([box_corners(self._prefix[..., 0], self._prefix[..., 1], self._prefix[..., 2],
-                                            self.params.length, self.params.width), rest.boxes[:, 1:]], axis=1)
+        """The full rollout of the screened candidates: their prefix continued from the last cut."""
+        j, pre = self._done_steps, self._prefix
+        rest = rollout(pre[:, -1], cand[:, j:], self.dt, self.params, self.settings.backend)
+        states = np.concatenate([pre, rest.states[:, 1:]], axis=1)
+        boxes = np.concatenate([box_corners(pre[..., 0], pre[..., 1], pre[..., 2], self.params.length,
+                                            self.params.width), rest.boxes[:, 1:]], axis=1)
         return Rollout(states=states, boxes=boxes)
 
     def _done(self, decision: str, control: np.ndarray, accel: float, tried: int, rob: dict[str, float],
