@@ -10,8 +10,9 @@ mode rewrites values only, on the same solver object.
 
 a. lower bound: the QP with every disjunction undecided;
 b. the mode read off its trajectory (per disjunction the disjunct whose rows hold best: the
-   slack of a big-M row with its binary at 1 is the predicate's margin); stop with a
-   certificate when the cost is within ``gap`` (0.5 %) of the bound;
+   slack of a big-M row with its binary at 1 is the predicate's margin; when the lower bound's
+   point already satisfies that mode, it is the mode's optimum and no QP is solved); stop with
+   a certificate when the cost is within ``gap`` (0.5 %) of the bound;
 c. seeds given by the caller (choices, or trajectories to read modes off) and a descent that
    re-reads the mode off the incumbent's own trajectory;
 d. best-first branch-and-bound over disjunctions within the remaining budget (node = partial
@@ -171,6 +172,23 @@ class ModeSearch:
         self._memo[key] = out
         return out
 
+    def _adopt(self, choice: np.ndarray, x: np.ndarray, duals: np.ndarray | None, tol: float = _FEAS) -> bool:
+        """When ``x``, the optimum of a relaxation of ``choice``'s QP (fewer rows enforced),
+        already satisfies that QP's rows and bounds (within ``tol``) with ``choice``'s binaries
+        set, it is that QP's optimum too: memoise it instead of solving (saves the read-off QP
+        whenever the lower bound's plan meets every rule). Not when the cost couples binaries
+        and continuous columns (the continuous optimum would depend on the mode)."""
+        ci = self.qp._Pf_ci
+        if ci is not None and np.any(ci.data):
+            return False
+        x_int, _ = self.to_int(choice)
+        xf = x.copy()
+        xf[self.qp.ints] = x_int
+        if self.qp.model.violation(xf) > tol:
+            return False
+        self._memo[choice.tobytes()] = (float(self.qp.model.objective(xf)), xf, duals)
+        return True
+
     # ------------------------------------------------------------------ search
     def run(
         self, *, seeds: Sequence[np.ndarray] = (), seed_points: Sequence[np.ndarray] = (),
@@ -206,7 +224,7 @@ class ModeSearch:
             return t1
 
         undecided = np.full(D, -1, np.int64)
-        lb, x_lb, _ = self.solve_mode(undecided)
+        lb, x_lb, z_lb = self.solve_mode(undecided)
         t = lap("lower_bound", t_start)
         if not np.isfinite(lb):
             return ModeResult("infeasible", np.inf, None, undecided, np.zeros(self.qp.ints.size), self.qps,
@@ -226,7 +244,9 @@ class ModeSearch:
         if D == 0:
             best[:] = [lb, x_lb, undecided, None]
         else:
-            consider(self.read_off(x_lb, allowed))
+            ch = self.read_off(x_lb, allowed)
+            self._adopt(ch, x_lb, z_lb)
+            consider(ch)
         t = lap("readoff", t)
         if search_ms is not None:  # the optional phases get at most search_ms from here
             cap = t + search_ms / 1e3
