@@ -150,3 +150,9 @@ def test_the_flawed_example_reports_what_its_readme_shows() -> None:
     )
     assert res.returncode == 1
     assert res.stdout.splitlines() == expected
+
+
+def test_horizon_needs_dt_and_dt_must_be_finite() -> None:
+    """--horizon alone was silently ignored and --dt inf made every interval a multiple (review)."""
+    assert run("check", str(ROOT / "rules"), "--horizon", "5").exit_code == 2
+    assert run("check", str(ROOT / "rules"), "--dt", "inf").exit_code == 2

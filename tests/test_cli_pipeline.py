@@ -72,3 +72,24 @@ def test_simulate_with_the_nmpc_baseline(tmp_path: Path, model: str) -> None:
     meta = json.loads((run_dir / "run.json").read_text())
     assert meta["settings"]["controller"] == ("nmpc" if model == "kinematic" else "nmpc-fourwheel")
     assert set(meta["summary"]["decisions"]) == {"nmpc"}
+
+
+def test_plan_reports_bad_input_not_a_rule_conflict(tmp_path: Path) -> None:
+    """A non-linear rule or a timeout used to be blamed on conflicting rules (MIL511) (review)."""
+    scen = tmp_path / "s.yaml"
+    (tmp_path / "nonlin.stl").write_text("input float v\ninput float v_max\nr = always[0:1] (v * v <= v_max);\n")
+    text = (ROOT / "examples" / "scenario" / "scenario.yaml").read_text()
+    text = text.replace("map: map.yaml", f"map: {ROOT / 'examples' / 'scenario' / 'map.yaml'}")
+    text = text.split("rules:")[0] + "rules:\n  - nonlin.stl\nrun: {duration: 5}\n"
+    scen.write_text(text)
+    res = runner.invoke(app, ["plan", str(scen)])
+    assert res.exit_code == 2 and "MIL501" in res.stderr and "MIL511" not in res.stderr
+    res = runner.invoke(app, ["plan", SCENARIO, "--time-limit", "0.001"])
+    assert "MIL511" not in res.stderr
+
+
+def test_plan_at_nan_is_refused(tmp_path: Path) -> None:
+    run_dir = tmp_path / "run"
+    assert runner.invoke(app, ["simulate", SCENARIO, "--out", str(run_dir), "--duration", "0.5", "--no-progress"]).exit_code == 0
+    res = runner.invoke(app, ["plan", SCENARIO, "--trace", str(run_dir / "trace.csv"), "--at", "nan"])
+    assert res.exit_code == 2 and "MIL513" in res.stderr

@@ -93,3 +93,10 @@ def test_unknown_format_is_refused() -> None:
 def test_sort_key_orders_by_file_then_position() -> None:
     ds = sorted(_diags(), key=sort_key)
     assert [d.span.file for d in ds] == ["a.stl", "b.stl"]
+
+
+def test_sarif_uris_are_percent_encoded() -> None:
+    """A path with reserved characters must stay a valid URI reference (review finding)."""
+    doc = json.loads(render("sarif", [TST901("m", Span("./we,ird::na%me x.stl", 1, 1))]))
+    uri = doc["runs"][0]["results"][0]["locations"][0]["physicalLocation"]["artifactLocation"]["uri"]
+    assert uri == "./we%2Cird%3A%3Ana%25me%20x.stl"

@@ -10,6 +10,7 @@ Exit codes (every command):
 from __future__ import annotations
 
 import enum
+import math
 import os
 import sys
 from typing import List, Optional
@@ -110,6 +111,10 @@ def check(
     from twolevel import pipeline
     from twolevel.diagnostics import render
 
+    if dt is not None and not math.isfinite(dt):
+        raise typer.BadParameter("must be a finite number of seconds", param_hint="--dt")
+    if horizon is not None and dt is None:
+        raise typer.BadParameter("needs --dt (the horizon is horizon × dt seconds)", param_hint="--horizon")
     fmt = output_format or _default_format()
     result = pipeline.check(paths, dt=dt, horizon=horizon)
     text = render(fmt.value, result.diagnostics, sources=result.sources, files_checked=result.files_checked, tool_version=__version__)
@@ -134,8 +139,10 @@ def _parse_consts(items: List[str]) -> dict[str, float]:
             if not sep or not name.strip():
                 raise ValueError
             out[name.strip()] = float(value)
+            if not math.isfinite(out[name.strip()]):
+                raise ValueError
         except ValueError:
-            raise typer.BadParameter(f"expected NAME=NUMBER, got {item!r}", param_hint="--const") from None
+            raise typer.BadParameter(f"expected NAME=NUMBER with a finite number, got {item!r}", param_hint="--const") from None
     return out
 
 
@@ -168,6 +175,8 @@ def monitor(
     from twolevel.monitor.tracefile import to_json
 
     payload = to_json(res.report)
+    if not payload["rules"] and any(d.is_error for d in res.diagnostics):
+        raise typer.Exit(EXIT_USAGE)  # nothing was evaluated: the findings above say why
     if output is MonitorFormat.json:
         _emit(json.dumps(payload) + "\n")
     else:
@@ -195,8 +204,9 @@ def _print_diagnostics(diags, sources=None) -> None:  # noqa: ANN001
     """Findings of plan/simulate go to stderr (stdout carries the result)."""
     if diags:
         from twolevel.diagnostics import render
+        from twolevel.pipeline import dedupe
 
-        sys.stderr.write(render("full" if sys.stderr.isatty() else "concise", diags, sources=sources or {}))
+        sys.stderr.write(render("full" if sys.stderr.isatty() else "concise", dedupe(diags), sources=sources or {}))
 
 
 @app.command()
@@ -222,6 +232,8 @@ def plan(
     _print_diagnostics(diags)
     if report_ is None:
         raise typer.Exit(EXIT_USAGE)
+    # a rule that cannot be encoded (MIL50x) or a model that could not be written (MIL514) is bad input
+    bad_input = any(d.is_error and (d.code.startswith("MIL50") or d.code == "MIL514") for d in diags)
     if output is MonitorFormat.json:
         _emit(json.dumps(report_.to_json()) + "\n")
     else:
@@ -250,6 +262,8 @@ def plan(
         if report_.message:
             facts.append(("note", report_.message))
         console.print(_table("solve", facts))
+    if bad_input:
+        raise typer.Exit(EXIT_USAGE)
     raise typer.Exit(EXIT_OK if report_.status in ("optimal", "feasible") else EXIT_FAIL)
 
 

@@ -16,7 +16,9 @@ from __future__ import annotations
 
 import enum
 import json
+import os
 from dataclasses import dataclass
+from urllib.parse import quote
 from typing import Iterable, Mapping
 
 __all__ = [
@@ -239,7 +241,7 @@ def render_sarif(diags: Iterable[Diagnostic], tool_version: str = "0") -> str:
             "locations": [
                 {
                     "physicalLocation": {
-                        "artifactLocation": {"uri": d.span.file},
+                        "artifactLocation": {"uri": quote(d.span.file.replace(os.sep, "/"))},
                         "region": {
                             "startLine": d.span.line,
                             "startColumn": d.span.column,

@@ -109,11 +109,12 @@ def check(paths: Sequence[str], *, dt: float | None = None, horizon: int | None 
 
             diags.extend(check_world_file(file))
             sources.setdefault(file, _read_text_quietly(file))
-    return CheckResult(tuple(_dedupe(diags)), len(files), sources)
+    return CheckResult(tuple(dedupe(diags)), len(files), sources)
 
 
-def _dedupe(diags: Iterable[Diagnostic]) -> list[Diagnostic]:
-    """A rule file checked directly and through a scenario reports each finding once."""
+def dedupe(diags: Iterable[Diagnostic]) -> list[Diagnostic]:
+    """Each finding once (a rule file checked directly and through a scenario, or loaded by
+    both controller levels, reports it once), in the order first seen."""
     seen: set[Diagnostic] = set()
     out = []
     for d in diags:
@@ -124,11 +125,16 @@ def _dedupe(diags: Iterable[Diagnostic]) -> list[Diagnostic]:
 
 
 def _read_text_quietly(path: str, limit: int = 1 << 20) -> str:
+    """The text of a regular file up to ``limit`` bytes, for showing source lines; "" for
+    anything else (a FIFO or a device would block or never end)."""
+    import stat
+
     try:
-        if os.path.getsize(path) > limit:
+        st = os.stat(path)
+        if not stat.S_ISREG(st.st_mode) or st.st_size > limit:
             return ""
         with open(path, "rb") as fh:
-            return fh.read().decode("utf-8", errors="replace")
+            return fh.read(limit).decode("utf-8", errors="replace")
     except OSError:
         return ""
 
@@ -170,13 +176,16 @@ def monitor(
     from twolevel.monitor.tracefile import monitor_trace, read_trace
     from twolevel.stl.lint import load_ruleset
 
-    ruleset, diags = load_ruleset(rules_path, consts)
+    trace, diags = read_trace(trace_path, dt=dt)
     sources = {rules_path: _read_text_quietly(rules_path)}
+    if trace is None or any(d.is_error for d in diags):
+        ruleset, rule_diags = load_ruleset(rules_path, consts)  # still report the rule file's findings
+        return MonitorResult(None, tuple(rule_diags + diags), sources)
+    # the trace's period decides the windows: an interval that is not a multiple of it (STL209)
+    # would be silently rounded to whole samples
+    ruleset, rule_diags = load_ruleset(rules_path, consts, dt=trace.dt)
+    diags = rule_diags + diags
     if ruleset is None:
-        return MonitorResult(None, tuple(diags), sources)
-    trace, trace_diags = read_trace(trace_path, dt=dt)
-    diags += trace_diags
-    if trace is None or any(d.is_error for d in trace_diags):
         return MonitorResult(None, tuple(diags), sources)
     report, run_diags = monitor_trace(ruleset.rules, dict(ruleset.consts), trace, series=series)
     diags += run_diags

@@ -100,3 +100,26 @@ def test_infinite_cells_are_values_not_errors(tmp_path: Path) -> None:
     [rule] = json.loads(res.stdout)["rules"]
     assert res.exit_code == 0, res.output
     assert rule["series"][0] == "inf" or rule["series"][0] > 0
+
+
+def test_interval_not_a_multiple_of_the_trace_period_is_refused(tmp_path: Path) -> None:
+    """The monitor used to round [0:0.15] at dt = 0.1 to whole samples silently (review)."""
+    rules = tmp_path / "r.stl"
+    rules.write_text("input float v\ninput float v_max\nr = always[0:0.15] (v <= v_max + 5);\n")
+    res = run(str(rules), DRIVE, "--format", "json")
+    assert res.exit_code == 2 and "STL209" in res.stderr and res.stdout == ""
+
+
+def test_non_finite_constants_are_refused() -> None:
+    for value in ("nan", "inf"):
+        res = run(str(ROOT / "rules" / "speed_limit.stl"), DRIVE, "--const", f"tol={value}")
+        assert res.exit_code == 2, value
+
+
+def test_a_fifo_as_the_rule_file_does_not_hang(tmp_path: Path) -> None:
+    import os
+
+    fifo = tmp_path / "rules.stl"
+    os.mkfifo(fifo)
+    res = run(str(fifo), DRIVE)
+    assert res.exit_code == 2 and "STL100" in res.stderr

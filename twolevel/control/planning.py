@@ -95,6 +95,8 @@ def _read_trace(path: str, at: float) -> tuple[dict[str, np.ndarray] | None, lis
     except (TypeError, ValueError) as e:
         return None, [MIL516(f"a trace cell is not a number: {e}", span)]
     t = cols["t"]
+    if not math.isfinite(at):
+        return None, [MIL513(f"--at must be a finite time in seconds, got {at}", span)]
     i = int(np.argmin(np.abs(t - at)))
     dt = float(np.median(np.diff(t))) if t.size > 1 else 0.1
     if abs(t[i] - at) > dt / 2 + 1e-9:
@@ -184,7 +186,11 @@ def plan_scenario(
             history = signals_along(world, None, past, t0=float(rec["t"][0]), dt=ws.dt)
     res = ctrl.solve(ego, t0, traffic, history)
     conflicts: tuple[str, ...] = ()
-    if res.status not in ("optimal", "feasible"):
+    unencodable = any(d.is_error and d.code.startswith("MIL50") for d in (*diags, *res.diagnostics))
+    timed_out = any(d.code == "MIL515" and "time limit" in d.message for d in res.diagnostics)
+    if res.status not in ("optimal", "feasible") and not unencodable and not timed_out:
+        # rules conflict only when the problem is infeasible, not when it timed out or a rule
+        # could not be encoded (those say so themselves)
         step, past_s, P = ctrl.prepare(ego, t0, traffic, history)
         conflicts = explain_infeasibility(ctrl, step, past_s, P)
         what = f"rules {', '.join(conflicts)} conflict" if conflicts else "no single rule or pair explains it"
