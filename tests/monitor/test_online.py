@@ -231,3 +231,38 @@ def test_deep_formulas_run_and_too_deep_terms_are_a_monitor_error() -> None:
         t = A.Neg(t)
     with pytest.raises(MonitorError, match="nested too deeply"):
         OnlineMonitor(A.Compare(">", t, A.Num(0.0)), DT)
+
+
+@pytest.mark.parametrize(
+    "f",
+    [
+        A.Temporal("eventually", A.Interval(0.0, 1e300), A.Compare("<=", A.Var("x"), A.Num(1.0))),
+        A.Temporal("always", A.Interval(0.3, 1e300), A.Var("x")),
+        A.BinTemporal("until", A.Interval(0.0, 1e300), A.Var("x"), A.Var("y")),
+        A.BinTemporal("unless", A.Interval(0.2, 1e300), A.Var("x"), A.Var("y")),
+    ],
+    ids=["eventually", "always", "until", "unless"],
+)
+def test_finish_with_a_huge_window_pads_only_what_it_owes(f: A.Node) -> None:
+    # 1e300 s at dt 0.1 is 1e301 samples of padding: finish() used to push every one (a hang).
+    sig = {"x": np.array([3.0, 1.0, -2.0, 0.5, 4.0]), "y": np.array([-1.0, 2.0, -3.0, 0.0, -1.0])}
+    mon = OnlineMonitor(f, DT)
+    for m, row in enumerate(_rows(sig)):
+        mon.update(row)
+        want = robustness(f, _prefix(sig, m + 1), DT)
+        assert np.array_equal(mon.finish()["formula"], want), m
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.floats(-5, 5), max_size=12), st.integers(1, 6), st.integers(0, 20), st.booleans())
+def test_wedge_skip_equals_pushing_the_pad(xs: list[float], width: int, m: int, is_min: bool) -> None:
+    pad = INF if is_min else -INF
+    a, b = ((wedge.MinWedge(width), wedge.MinWedge(width)) if is_min else (wedge.MaxWedge(width), wedge.MaxWedge(width)))
+    for x in xs:
+        a.push(x)
+        b.push(x)
+    for _ in range(m):
+        a.push(pad)
+    b.skip(m, pad)
+    assert (list(a.vals), list(a.idx), a.count) == (list(b.vals), list(b.idx), b.count)
+    assert a.push(pad) == b.push(pad)

@@ -18,7 +18,7 @@ import copy
 from collections import deque
 from typing import Any, Callable
 
-from twolevel.monitor.wedge import IDENTITY, INF, ClampWindow, MaxWedge, MinWedge
+from twolevel.monitor.wedge import INF, ClampWindow, MaxWedge, MinWedge
 
 Pair = tuple[float, float]
 UNKNOWN: Pair = (-INF, INF)
@@ -273,13 +273,12 @@ class FutureWindow(Node):
         return self.wedge.push
 
     def flush(self) -> list[float]:
-        out = []
-        n = self.wedge.count
-        for k in range(n, n + self.b):
-            v = self.wedge.push(self.pad)
-            if k >= self.b:
-                out.append(v)
-        return out
+        # ``b`` pads end the trace, but only the last ``min(n, b)`` emit a value still owed: the
+        # others merely slide the window, which ``skip`` does at once (``b`` may be 1e301).
+        wedge, n = self.wedge, self.wedge.count
+        wedge.skip(self.b - n, self.pad)
+        push, pad = wedge.push, self.pad
+        return [push(pad) for _ in range(min(n, self.b))]
 
 
 class PastWindow(Node):
@@ -329,13 +328,11 @@ class Until0(Node):
         return p if self.count > self.w else None
 
     def flush(self) -> list[float]:
-        out = []
-        n = self.count
-        for k in range(n, n + self.w):
-            p = self.win.push(IDENTITY)[0]
-            if k >= self.w:
-                out.append(p)
-        return out
+        # Sample ``j`` still owed (the last ``min(n, w)``) composes the clamps ``j .. n-1``: the
+        # window's suffixes, read off without pushing ``w`` identities (``w`` may be 1e301).
+        owed = min(self.count, self.w)
+        sufs = self.win.suffixes()
+        return [c[0] for c in sufs[len(sufs) - owed :]] if owed else []
 
 
 class Since0(Node):

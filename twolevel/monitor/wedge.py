@@ -49,6 +49,27 @@ class MinWedge:
             idx.popleft()
         return vals[0]
 
+    def skip(self, m: int, pad: float) -> None:
+        """Exactly ``m`` pushes of ``pad`` (``+inf``: no value exceeds it) in O(1) amortised,
+        whatever ``m``: the end-of-trace padding of a window ``1e300`` samples long."""
+        if m <= 0:
+            return
+        vals, idx = self.vals, self.idx
+        while vals and vals[-1] >= pad:
+            vals.pop()
+            idx.pop()
+        self._append_skipped(m, pad)
+
+    def _append_skipped(self, m: int, pad: float) -> None:
+        vals, idx = self.vals, self.idx
+        k = self.count + m - 1
+        vals.append(pad)
+        idx.append(k)
+        self.count = k + 1
+        while idx[0] <= k - self.width:
+            vals.popleft()
+            idx.popleft()
+
 
 class MaxWedge(MinWedge):
     """The maximum of the last ``width`` values pushed (``width >= 1``)."""
@@ -69,6 +90,16 @@ class MaxWedge(MinWedge):
             vals.popleft()
             idx.popleft()
         return vals[0]
+
+    def skip(self, m: int, pad: float) -> None:
+        """Exactly ``m`` pushes of ``pad`` (``-inf``: no value is below it)."""
+        if m <= 0:
+            return
+        vals, idx = self.vals, self.idx
+        while vals and vals[-1] <= pad:
+            vals.pop()
+            idx.pop()
+        self._append_skipped(m, pad)
 
 
 def compose(outer: Clamp, inner: Clamp) -> Clamp:
@@ -120,3 +151,16 @@ class ClampWindow:
         if front:
             return self._op(front[-1], self.back_agg) if self.back else front[-1]
         return self.back_agg
+
+    def suffixes(self) -> list[Clamp]:
+        """The composition of every suffix of the window, longest (from the oldest clamp) first:
+        what pushing identities until the window is empty would return, without the pushes."""
+        out: list[Clamp] = []
+        acc = IDENTITY
+        for c in reversed(self.back):
+            acc = self._op(c, acc)
+            out.append(acc)
+        out.reverse()
+        back = self.back_agg if self.back else IDENTITY
+        head = [self._op(f, back) for f in reversed(self.front)]
+        return head + out
