@@ -40,7 +40,13 @@ from twolevel.stl.ast import (
     Var,
 )
 
-__all__ = ["RuleSet", "typecheck", "BUILTIN_ARITY", "map_vars"]
+__all__ = ["RuleSet", "typecheck", "BUILTIN_ARITY", "map_vars", "MAX_INTERVAL_SAMPLES", "MAX_INTERVAL_SECONDS"]
+
+MAX_INTERVAL_SAMPLES = 10_000_000
+"""Longest finite interval bound [samples of dt] (STL220): beyond it no trace is that long,
+and the monitors' windows and delay lines would be absurd."""
+MAX_INTERVAL_SECONDS = 1e6
+"""Longest finite interval bound [s] when no ``dt`` is known (STL220): about 11.6 days."""
 
 BUILTIN_ARITY: Mapping[str, int] = MappingProxyType({"collision_free": 1})
 """Number of arguments of each built-in world predicate (design.md: collision_free(d) [m])."""
@@ -170,6 +176,8 @@ class _Checker:
             self.diags.append(codes.STL207(f"interval [{iv.lo:g}:{iv.hi:g}] is inverted: it holds no time", sp,
                                            hint=f"write [{iv.hi:g}:{iv.lo:g}]"))
             return
+        if self.too_long(iv, sp):
+            return
         if iv.lo == iv.hi:
             self.diags.append(codes.STL208(f"interval [{iv.lo:g}:{iv.hi:g}] is a single instant", sp,
                                            hint="the operator only shifts time; widen the interval if a window was meant"))
@@ -181,6 +189,20 @@ class _Checker:
                         f"interval bound {b:g} s is not a multiple of dt = {self.dt:g} s", sp,
                         hint=f"use {round(k) * self.dt:g} or {(math.floor(k) if round(k) > k else math.ceil(k)) * self.dt:g}"))
                     break
+
+    def too_long(self, iv: Interval, sp: Span) -> bool:
+        """STL220 for a finite bound beyond the limit (1e7 samples at ``dt``, else 1e6 s)."""
+        far = iv.hi if iv.bounded else iv.lo
+        if self.dt:
+            limit, what = MAX_INTERVAL_SAMPLES * self.dt, f"{MAX_INTERVAL_SAMPLES:.0e} samples of dt = {self.dt:g} s"
+        else:
+            limit, what = MAX_INTERVAL_SECONDS, f"{MAX_INTERVAL_SECONDS:g} s"
+        if not (math.isfinite(far) and far > limit):
+            return False
+        self.diags.append(codes.STL220(
+            f"interval [{iv.lo:g}:{iv.hi:g}] reaches {far:g} s, beyond the limit of {what}", sp,
+            hint="no trace is that long: use a shorter bound, or drop the bound for an unbounded operator"))
+        return True
 
     # -- precedence / portability
     def style(self, f: Node) -> None:
