@@ -14,7 +14,7 @@ import time
 import numpy as np
 import pytest
 
-from twolevel.sim.trace import BASE_COLUMNS, TraceWriter, read_run, write_json_atomic
+from twolevel.sim.trace import BASE_COLUMNS, TraceWriter, read_run
 
 COLUMNS = BASE_COLUMNS + ("rob_speed",)
 
@@ -103,8 +103,3 @@ def test_missing_files_are_listed(tmp_path) -> None:
     assert read_run(tmp_path / "nope").problems
 
 
-def test_atomic_json_replaces_whole_file(tmp_path) -> None:
-    target = tmp_path / "x.json"
-    write_json_atomic(target, {"a": np.float64(1.5), "b": np.arange(3)})
-    assert json.loads(target.read_text()) == {"a": 1.5, "b": [0, 1, 2]}
-    assert not list(tmp_path.glob(".*.tmp"))

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from twolevel import __version__
-from twolevel.report.files import write_text_atomic
+from twolevel.atomic import write_text_atomic
 from twolevel.report.comparison import ComparisonTable, compare_metrics
 from twolevel.report.metrics import Metrics, compute_metrics
 from twolevel.sim.trace import RunData, read_run, write_json_atomic
@@ -150,7 +150,7 @@ def _write(
         if anim.gif is not None:
             gif_bytes = anim.gif
             path = out / GIF_FILE
-            from twolevel.report.files import write_bytes_atomic
+            from twolevel.atomic import write_bytes_atomic
 
             files.append(str(write_bytes_atomic(path, anim.gif)))
             if anim.total > anim.frames:

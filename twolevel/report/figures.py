@@ -17,7 +17,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from twolevel.report.files import write_bytes_atomic
+from twolevel.atomic import write_bytes_atomic
 from twolevel.report.metrics import COLLISION_LINE_M, DECISIONS, LIGHT_STATES, RULE_PREFIX, STEP_BUDGET_MS, Metrics, find_violations
 from twolevel.sim.trace import RunData
 

@@ -19,6 +19,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
+from twolevel.atomic import write_json_atomic
+
+__all__ = ["BASE_COLUMNS", "TEXT_COLUMNS", "TraceWriter", "RunData", "read_run", "write_json_atomic"]
+
 TRACE_FILE = "trace.csv"
 RUN_FILE = "run.json"
 
@@ -44,26 +48,6 @@ BASE_COLUMNS: tuple[str, ...] = (
 )
 
 TEXT_COLUMNS = frozenset({"decision", "light_state"})
-
-
-def write_json_atomic(path: str | os.PathLike[str], payload: Any) -> None:
-    """Write JSON so that a reader sees either the old file or the whole new one."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "w", encoding="utf-8") as fh:
-        json.dump(payload, fh, indent=2, sort_keys=False, default=_json_default)
-        fh.write("\n")
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
-
-
-def _json_default(obj: Any) -> Any:
-    if hasattr(obj, "tolist"):
-        return obj.tolist()
-    if hasattr(obj, "item"):
-        return obj.item()
-    raise TypeError(f"{type(obj).__name__} is not JSON serialisable")
 
 
 def _cell(value: Any) -> str:
