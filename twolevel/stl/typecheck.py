@@ -318,6 +318,8 @@ def typecheck(
                         _span(n, file), hint=f"bound it, e.g. {n.op}[0:1]"))
             elif isinstance(n, Call):
                 _check_call(n, ck)
+            elif isinstance(n, Arith) and n.op == "/":
+                _check_divisor(n, consts, ck)
             elif isinstance(n, Compare) and n.op in ("==", "!=="):
                 if not _integral(n, types):
                     diags.append(codes.STL213(
@@ -405,6 +407,15 @@ def _check_names(r: Rule, ck: _Checker, inputs: list[str], consts: Mapping[str, 
             elif hint is None:
                 hint = f"declare it, e.g. 'input float {n.name}'"
             ck.diags.append(codes.STL201(f"undeclared name '{n.name}'", sp, hint=hint))
+
+
+def _check_divisor(n: Arith, consts: Mapping[str, float | None], ck: _Checker) -> None:
+    """STL221 when the divisor of ``n`` folds to 0 (a literal, or constants with values)."""
+    known = {k: v for k, v in consts.items() if v is not None}
+    d = fold_term(n.right, known)
+    if isinstance(d, Num) and d.value == 0:
+        ck.diags.append(codes.STL221("division by zero: the term is infinite (or NaN) at every sample",
+                                     _span(n.right, ck.file), hint="divide by a non-zero constant or a signal"))
 
 
 def _check_call(n: Call, ck: _Checker) -> None:
