@@ -92,3 +92,19 @@ def test_overrides() -> None:
     assert BicycleParams().with_overrides({"l_f": 2.5}).l_f == 2.5
     with pytest.raises(UnknownParameterError):
         BicycleParams().with_overrides({"wheelbase": 2.5})
+
+
+def test_compiling_leaves_nothing_in_the_working_directory(tmp_path, monkeypatch) -> None:
+    """casadi's JIT wrote jit_tmp*.c and tmp_casadi_compiler_shell*.so into the current folder
+    (and so into the repository after `make run`) (regression)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import numpy as np\n"
+        "from twolevel.models import fourwheel as fw, rollout as r\n"
+        "assert r.compiled_available()\n"
+        "r.rollout(fw.initial_state(v=5.0), np.zeros((3, 10, 2)), 0.1, backend='casadi')\n"
+    )
+    subprocess.run([sys.executable, "-c", code], cwd=tmp_path, check=True)
+    assert list(tmp_path.iterdir()) == []

@@ -23,6 +23,8 @@ The first call per (parameters, dt, H, K) builds the functions (≈ 0.3 s with t
 from __future__ import annotations
 
 import functools
+import os
+import tempfile
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -62,11 +64,30 @@ def _substep_function(p: VehicleParams, h: float, jit: bool) -> Any:
     delta = ca.SX.sym("delta")
     gamma = ca.SX.sym("gamma")
     cols = fw.substep([x[i] for i in range(fw.NX)], delta, gamma, h, p, casadi_ops())
-    opts: dict[str, Any] = {}
-    if jit:
-        opts = {"jit": True, "compiler": "shell", "jit_temp_suffix": True,
-                "jit_options": {"compiler": "gcc", "flags": ["-O2"], "verbose": False}}
-    return ca.Function("fourwheel_substep", [x, delta, gamma], [ca.vertcat(*cols)], opts)
+    if not jit:
+        return ca.Function("fourwheel_substep", [x, delta, gamma], [ca.vertcat(*cols)])
+    opts = {"jit": True, "compiler": "shell", "jit_temp_suffix": True,
+            "jit_options": {"compiler": "gcc", "flags": ["-O2"], "verbose": False}}
+    # casadi writes its C source and shared object into the current directory (casadi issue
+    # #2230) and removes them when the function is destroyed: compile inside a private build
+    # directory so that a run never litters the user's folder
+    cwd = os.getcwd()
+    os.chdir(_jit_dir())
+    try:
+        return ca.Function("fourwheel_substep", [x, delta, gamma], [ca.vertcat(*cols)], opts)
+    finally:
+        os.chdir(cwd)
+
+
+@functools.lru_cache(maxsize=1)
+def _jit_dir() -> str:
+    """This user's private directory for casadi's JIT files (file names are unique per build)."""
+    path = os.path.join(tempfile.gettempdir(), f"twolevel-jit-{os.getuid()}")
+    os.makedirs(path, mode=0o700, exist_ok=True)
+    st = os.stat(path)
+    if st.st_uid != os.getuid() or st.st_mode & 0o077:  # not ours, or open to others: use a fresh one
+        path = tempfile.mkdtemp(prefix="twolevel-jit-")
+    return path
 
 
 @functools.lru_cache(maxsize=1)
