@@ -195,3 +195,15 @@ def test_violation_intervals_cover_exactly_the_negative_samples(values) -> None:
         assert np.array_equal(covered, rob < 0)
     starts, ends = intervals(rob < 0)
     assert len(starts) == len(viol)
+
+
+def test_a_time_column_running_backwards_is_a_problem(tmp_path) -> None:
+    """A reversed trace gave 'simulated time -0.5 s' without a word (review)."""
+    from twolevel.report.metrics import compute_metrics
+    from twolevel.sim.trace import TraceWriter, read_run
+
+    with TraceWriter(tmp_path, ("t", "v"), {}) as w:
+        for t in (0.5, 0.4, 0.3):
+            w.write({"t": t, "v": 1.0})
+    m = compute_metrics(read_run(tmp_path))
+    assert any("does not increase at row 3" in p for p in m.problems)

@@ -103,3 +103,14 @@ def test_missing_files_are_listed(tmp_path) -> None:
     assert read_run(tmp_path / "nope").problems
 
 
+
+
+def test_a_new_run_removes_the_previous_runs_report(tmp_path) -> None:
+    """Re-running into a run directory left the old report.html beside the new trace (review)."""
+    (tmp_path / "report.html").write_text("old")
+    (tmp_path / "figures").mkdir()
+    (tmp_path / "figures" / "speed.png").write_bytes(b"png")
+    (tmp_path / "notes.txt").write_text("mine")
+    with TraceWriter(tmp_path, ("t",), {}) as w:
+        w.write({"t": 0.0})
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt", "run.json", "trace.csv"]

@@ -526,6 +526,11 @@ def compute_metrics(run: RunData, label: str | None = None) -> Metrics:
     violations.sort(key=lambda w: (w.t_start, w.rule))
     near_f = near[np.isfinite(near)] if near is not None else np.array([])
     problems = list(run.problems)
+    steps = np.diff(t)
+    if steps.size and not np.all(steps > 0):
+        k = int(np.flatnonzero(~(steps > 0))[0]) + 1
+        problems.append(f"the time column does not increase at row {k + 2} (t = {t[k - 1]:g} s, then {t[k]:g} s): "
+                        "durations and rates are unreliable")
     collisions = _collisions(gap, t, x, y, meta, cols.problems)
     has = cols.n > 0
     return Metrics(

@@ -49,6 +49,10 @@ BASE_COLUMNS: tuple[str, ...] = (
 
 TEXT_COLUMNS = frozenset({"decision", "light_state"})
 
+#: Files a report writes into a run directory: a new run in the same directory removes them, so
+#: a report of the previous run never stands beside the new trace.
+REPORT_OUTPUTS: tuple[str, ...] = ("report.html", "summary.json", "summary.md", "animation.gif", "figures")
+
 
 def _cell(value: Any) -> str:
     if value is None:
@@ -83,6 +87,7 @@ class TraceWriter:
     ) -> None:
         self.run_dir = Path(run_dir)
         self.run_dir.mkdir(parents=True, exist_ok=True)
+        _remove_stale_report(self.run_dir)
         self.columns = tuple(columns)
         if len(set(self.columns)) != len(self.columns):
             raise ValueError("duplicate trace column names")
@@ -136,6 +141,17 @@ class TraceWriter:
         else:
             self.meta["error"] = f"{exc_type.__name__}: {exc}"
             self.close("crashed", self.meta.get("summary"))
+
+
+def _remove_stale_report(run_dir: Path) -> None:
+    import shutil
+
+    for name in REPORT_OUTPUTS:
+        p = run_dir / name
+        if p.is_dir() and not p.is_symlink():
+            shutil.rmtree(p)
+        elif p.exists() or p.is_symlink():
+            p.unlink()
 
 
 @dataclass(frozen=True)
