@@ -52,8 +52,8 @@ and judged in full. Which candidate is chosen, its robustness and the count of c
 do not change; an intervention where nothing satisfies (the full brake) costs about j / H of
 the rollouts instead of all of them, for one more signals and monitor pass per cut. When the car is (almost) standing and the least-violating
 choice is enabled, that choice needs the exact worst robustness of the best candidate: a dropped
-candidate whose prefix bound reaches the best known is judged in full as well (branch and
-bound; the others cannot be chosen).
+candidate whose prefix bound beats the best so far (strictly) and reaches the round's best
+judged one is judged in full as well (branch and bound; the others cannot be chosen).
 
 **Cost of a candidate** (lower is better): Σ_{k=1..H} ‖p_k − p̂_k‖² + (v_k − v̂_k)² — the
 distance of its detailed trajectory from the MPC's planned one (p̂, v̂: ``target``; the plan
@@ -334,11 +334,14 @@ class LowLevelController:
                                   {n: float(v[j]) for n, v in rob.items()}, mpc_rob, states[j], tm, t_start)
             worst = np.min(np.stack(list(rob.values())), axis=0) if rob else np.zeros(0)
             if bound is not None and exact_worst:
-                # a dropped candidate can only be the least violating if its prefix bound reaches
-                # the best worst robustness known: judge those in full too (NaN: judge)
-                tau = max(best[0] if best is not None else -np.inf,
-                          float(np.max(worst[~np.isnan(worst)], initial=-np.inf)))
-                extra = np.flatnonzero(~keep & ~(bound < tau))
+                # a dropped candidate can replace the best only if its prefix bound (≥ its worst
+                # robustness) beats the best's (strictly) and reaches the round's best judged
+                # one (on a tie, only from a lower index): judge those in full too (NaN: judge)
+                b = best[0] if best is not None else -np.inf
+                valid = ~np.isnan(worst)
+                m = float(np.max(worst[valid], initial=-np.inf))
+                jm = int(idx[np.flatnonzero(valid & (worst == m))[0]]) if np.isfinite(m) else len(cand)
+                extra = np.flatnonzero(~keep & ~(bound <= b) & ~(bound < m) & ~((bound == m) & (np.arange(k) > jm)))
                 if len(extra):
                     t0 = time.perf_counter()
                     more = rollout(x0, cand[extra], dt, p, st.backend).states
