@@ -19,7 +19,7 @@ d. best-first branch-and-bound over disjunctions within the remaining budget (no
    mode, bound = its QP cost, branch on the most violated undecided disjunction); exact within
    ``bnb_gap`` when run to completion (``budget_ms=None``);
 e. with whatever budget the branch-and-bound leaves (``bnb=False``, or a budget it did not use):
-   per-disjunction flips ordered by the dual values of the chosen disjuncts' rows, then one more
+   late seeds, then per-disjunction flips ordered by the dual values of the chosen disjuncts' rows, then one more
    descent. (Measured on the closed-loop benchmark: run before the branch-and-bound under a QP
    cap, the flips spent the cap without finding the optimum the branch-and-bound then missed.)
 """
@@ -194,7 +194,7 @@ class ModeSearch:
         self, *, seeds: Sequence[np.ndarray] = (), seed_points: Sequence[np.ndarray] = (),
         budget_ms: float | None = 50.0, gap: float = 0.005, bnb_gap: float = 1e-4, abs_tol: float = 1e-6,
         max_flips: int = 6, bnb: bool = True, search_ms: float | None = None, max_flip_qps: int | None = None,
-        search_qps: int | None = None,
+        search_qps: int | None = None, late_seed_points: Sequence[np.ndarray] = (),
     ) -> ModeResult:
         """Search a mode; see the module docstring. ``seeds``: choice arrays; ``seed_points``: full
         points x (unknown columns 0) to read modes off. ``budget_ms=None``: no time limit (the
@@ -202,7 +202,8 @@ class ModeSearch:
         (seeds, descent, flips, branch-and-bound) counted from the end of the read-off, within
         ``budget_ms``; ``search_qps``: the same cap counted in QPs (deterministic, unlike time);
         ``max_flip_qps``: at most that many QPs in the flips phase (the flips are tried in
-        decreasing order of the dual weight of the chosen disjunct's rows)."""
+        decreasing order of the dual weight of the chosen disjunct's rows). ``late_seed_points``:
+        points read off only with the budget the branch-and-bound leaves (phase e)."""
         t_start = time.perf_counter()
         self._memo.clear()
         self.qps = 0
@@ -279,6 +280,11 @@ class ModeSearch:
         # the heuristic flips only with what the branch-and-bound leaves (it either finishes,
         # exact, or spends the cap: measured, it finds the optimum in fewer QPs than the flips)
         if D and not cert and not certified() and not out_of_time():
+            for p in late_seed_points:
+                if out_of_time() or certified():
+                    break
+                consider(self.read_off(p, allowed))
+            t = lap("seeds", t)
             # flips ordered by the duals of the chosen disjuncts' rows
             improved = True
             rounds = 0
