@@ -236,3 +236,25 @@ def test_consts_of_a_rule_file() -> None:
     )
     assert consts_of(rf) == {"a": 2.0, "b": -3.0}
     assert math.isfinite(consts_of(rf)["b"])
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "mkfifo"), reason="no FIFOs here")
+def test_fifo_and_device_are_refused_without_blocking(tmp_path: Path) -> None:
+    import os
+    import threading
+
+    fifo = tmp_path / "fifo.csv"
+    os.mkfifo(fifo)
+    box: list = []
+    th = threading.Thread(target=lambda: box.append(read_trace(str(fifo))), daemon=True)
+    th.start()
+    th.join(5.0)
+    if th.is_alive():  # release the blocked reader (end of file), then fail
+        os.close(os.open(fifo, os.O_WRONLY | os.O_NONBLOCK))
+        th.join(5.0)
+        pytest.fail("read_trace blocked on a FIFO")
+    trace, diags = box[0]
+    assert trace is None and _codes(diags) == [("SIM605", 1, 1)] and "FIFO" in diags[0].message
+    if Path("/dev/zero").exists():
+        trace, diags = read_trace("/dev/zero")
+        assert trace is None and _codes(diags) == [("SIM605", 1, 1)] and "device" in diags[0].message

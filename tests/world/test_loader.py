@@ -238,3 +238,52 @@ def test_check_path_does_not_import_numpy(world: Path) -> None:
         "assert not bad, bad\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def _returns_within(fn, fifo: Path, seconds: float = 5.0):
+    """``fn()``'s result, failing (not hanging) if it blocks: a reader stuck on the FIFO is
+    released by opening the write end and closing it (end of file)."""
+    import os
+    import threading
+
+    box: list = []
+    th = threading.Thread(target=lambda: box.append(fn()), daemon=True)
+    th.start()
+    th.join(seconds)
+    if th.is_alive():
+        os.close(os.open(fifo, os.O_WRONLY | os.O_NONBLOCK))
+        th.join(seconds)
+        pytest.fail(f"reading {fifo} blocked")
+    return box[0]
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "mkfifo"), reason="no FIFOs here")
+def test_fifo_is_refused_without_blocking(tmp_path: Path) -> None:
+    import os
+
+    fifo = tmp_path / "fifo.yaml"
+    os.mkfifo(fifo)
+    m, diags = _returns_within(lambda: load_map(fifo), fifo)
+    assert m is None and [d.code for d in diags] == ["YML401"] and "FIFO" in diags[0].message
+    write(tmp_path, "map.yaml", MAP)
+    scn = write(tmp_path, "scn.yaml", SCENARIO.replace("map: map.yaml", "map: fifo.yaml"))
+    s, diags = _returns_within(lambda: load_scenario(scn), fifo)
+    assert s is None and codes_lines(diags) == [("YML418", 2)] and "FIFO" in diags[0].message, diags
+
+
+@pytest.mark.skipif(not Path("/dev/zero").exists(), reason="no /dev/zero")
+def test_device_file_is_refused_without_reading_it() -> None:
+    m, diags = load_map("/dev/zero")
+    assert m is None and [d.code for d in diags] == ["YML401"] and "device" in diags[0].message
+
+
+def test_shared_reader_reads_at_most_the_limit(tmp_path: Path) -> None:
+    from twolevel.files import read_regular
+
+    p = tmp_path / "f.txt"
+    p.write_bytes(b"x" * 100)
+    assert read_regular(p, 100) == (b"x" * 100, None)
+    data, refusal = read_regular(p, 99)
+    assert data is None and refusal is not None and refusal.kind == "too-large" and refusal.size == 100
+    assert read_regular(tmp_path / "nope", 10)[1].kind == "missing"
+    assert read_regular(tmp_path, 10)[1].kind == "directory"

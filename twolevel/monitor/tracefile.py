@@ -17,17 +17,20 @@ values (``true``, empty windows) are written as the strings ``"inf"`` / ``"-inf"
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import difflib
+import io
 import math
 import os
 from array import array
 from dataclasses import dataclass, field, replace
-from typing import Any, Mapping, Sequence
+from typing import Any, BinaryIO, Iterator, Mapping, Sequence
 
 import numpy as np
 
 from twolevel.diagnostics import Diagnostic, Severity, Span
+from twolevel.files import open_regular
 from twolevel.monitor.codes import SIM601, SIM602, SIM603, SIM604, SIM605, SIM606, SIM607, SIM608
 from twolevel.monitor.errors import MonitorError
 from twolevel.monitor.robustness import DEFAULT_BUILTINS, Builtin, robustness
@@ -110,15 +113,30 @@ def _read_rows(
     for each column holding a cell that is not a number (text, empty, NaN) the diagnostic of its
     first such cell. ``inf``/``-inf`` are numbers (e.g. ``d_stop`` with no stop line near)."""
     whole = Span.whole_file(path)
+    fh, refusal = open_regular(path)
+    if fh is None:
+        assert refusal is not None
+        if refusal.kind == "missing":
+            diags.append(SIM605(f"trace file '{path}' does not exist", whole, hint="check the path"))
+        elif refusal.kind == "directory":
+            diags.append(SIM605(f"'{path}' is a directory, not a trace file", whole))
+        elif refusal.kind == "special":
+            diags.append(SIM605(f"'{path}' is not a regular file: it is {refusal.detail}", whole,
+                                hint="save the trace to a file first"))
+        else:
+            diags.append(SIM605(f"cannot read trace file '{path}': {refusal.detail}", whole))
+        return None
+    with fh:
+        return _read_open(path, fh, diags)
+
+
+def _read_open(
+    path: str, fh: BinaryIO, diags: list[Diagnostic]
+) -> tuple[list[str], list[array], list[int], dict[str, Diagnostic]] | None:
+    whole = Span.whole_file(path)
     try:
-        with open(path, "rb") as fh:
-            head = fh.read(8192)
-    except FileNotFoundError:
-        diags.append(SIM605(f"trace file '{path}' does not exist", whole, hint="check the path"))
-        return None
-    except IsADirectoryError:
-        diags.append(SIM605(f"'{path}' is a directory, not a trace file", whole))
-        return None
+        head = fh.read(8192)
+        fh.seek(0)
     except OSError as exc:
         diags.append(SIM605(f"cannot read trace file '{path}': {exc.strerror or exc}", whole))
         return None
@@ -135,8 +153,8 @@ def _read_rows(
     errors = 0
     line = 0
     try:
-        with open(path, encoding="utf-8-sig", newline="") as fh:
-            reader = csv.reader(fh)
+        with _text_of(fh) as text:
+            reader = csv.reader(text)
             for row in reader:
                 line = reader.line_num
                 if not row or all(not c.strip() for c in row):
@@ -178,7 +196,7 @@ def _read_rows(
                     diags.append(SIM603(f"stopped after {errors} bad rows", Span(path, line, 1)))
                     return None
     except UnicodeDecodeError:
-        bad = _first_non_utf8_line(path)
+        bad = _first_non_utf8_line(fh)
         diags.append(
             SIM605(
                 f"line {bad} of the trace file is not valid UTF-8",
@@ -198,10 +216,20 @@ def _read_rows(
     return header, cols, list(lines), unusable
 
 
-def _first_non_utf8_line(path: str) -> int:
+@contextlib.contextmanager
+def _text_of(fh: BinaryIO) -> Iterator[io.TextIOWrapper]:
+    """``fh`` read as UTF-8 text (BOM dropped, newlines kept for csv); ``fh`` stays open after."""
+    text = io.TextIOWrapper(fh, encoding="utf-8-sig", newline="")
+    try:
+        yield text
+    finally:
+        text.detach()
+
+
+def _first_non_utf8_line(fh: BinaryIO) -> int:
     """The 1-based number of the first line that does not decode as UTF-8 (streamed)."""
-    with open(path, "rb") as fh:
-        for number, raw in enumerate(fh, start=1):
+    fh.seek(0)
+    for number, raw in enumerate(fh, start=1):
             try:
                 raw.decode("utf-8")
             except UnicodeDecodeError:

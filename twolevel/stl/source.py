@@ -8,10 +8,8 @@ byte-order mark is dropped. Empty files are the parser's business (STL104).
 
 from __future__ import annotations
 
-import os
-import stat
-
 from twolevel.diagnostics import Diagnostic, Span
+from twolevel.files import read_regular
 from twolevel.stl import codes
 
 __all__ = ["read_source", "MAX_BYTES"]
@@ -31,32 +29,23 @@ def _byte_pos(data: bytes, offset: int) -> tuple[int, int]:
 def read_source(path: str, *, max_bytes: int = MAX_BYTES) -> tuple[str | None, list[Diagnostic]]:
     """The text of the rule file at ``path``, or ``None`` and the reason."""
     whole = Span.whole_file(path)
-    try:
-        st = os.stat(path)
-    except FileNotFoundError:
-        return None, [codes.STL100(f"no such file: {path}", whole)]
-    except PermissionError:
-        return None, [codes.STL100(f"permission denied: {path}", whole)]
-    except OSError as e:
-        return None, [codes.STL100(f"cannot read {path}: {e.strerror or e}", whole)]
-    if stat.S_ISDIR(st.st_mode):
-        return None, [codes.STL100(f"{path} is a directory, not a rule file", whole,
-                                   hint="pass the .stl files inside it")]
-    if not stat.S_ISREG(st.st_mode):
-        return None, [codes.STL100(f"{path} is not a regular file", whole)]
-    if st.st_size > max_bytes:
-        return None, [codes.STL107(
-            f"file is {st.st_size / 2**20:.1f} MiB; rule files are limited to {max_bytes / 2**20:g} MiB",
-            whole, hint="is this really a rule file?")]
-    try:
-        with open(path, "rb") as fh:
-            data = fh.read(max_bytes + 1)
-    except PermissionError:
-        return None, [codes.STL100(f"permission denied: {path}", whole)]
-    except OSError as e:
-        return None, [codes.STL100(f"cannot read {path}: {e.strerror or e}", whole)]
-    if len(data) > max_bytes:  # grew since stat
-        return None, [codes.STL107(f"file is larger than {max_bytes / 2**20:g} MiB", whole)]
+    data, refusal = read_regular(path, max_bytes)
+    if data is None:
+        assert refusal is not None
+        if refusal.kind == "missing":
+            return None, [codes.STL100(f"no such file: {path}", whole)]
+        if refusal.kind == "denied":
+            return None, [codes.STL100(f"permission denied: {path}", whole)]
+        if refusal.kind == "directory":
+            return None, [codes.STL100(f"{path} is a directory, not a rule file", whole,
+                                       hint="pass the .stl files inside it")]
+        if refusal.kind == "special":
+            return None, [codes.STL100(f"{path} is not a regular file: it is {refusal.detail}", whole)]
+        if refusal.kind == "too-large":
+            return None, [codes.STL107(
+                f"file is {(refusal.size or 0) / 2**20:.1f} MiB; rule files are limited to {max_bytes / 2**20:g} MiB",
+                whole, hint="is this really a rule file?")]
+        return None, [codes.STL100(f"cannot read {path}: {refusal.detail}", whole)]
     nul = data.find(b"\x00")
     if nul >= 0:
         line, col = _byte_pos(data, nul)

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import yaml
@@ -21,6 +20,7 @@ from yaml.constructor import SafeConstructor
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
 from twolevel.diagnostics import Diagnostic, Span
+from twolevel.files import read_regular
 from twolevel.world.codes import YML401, YML402, YML403, YML404, YML405, YML406, YML407, YML408, YML409, YML422
 
 __all__ = ["Document", "Where", "read_document", "MAX_BYTES", "MAX_NODES", "MAX_ALIASES", "MAX_DEPTH"]
@@ -182,21 +182,20 @@ def read_document(path: str | os.PathLike[str]) -> tuple[Document | None, list[D
     """
     file = str(path)
     whole = Span.whole_file(file)
-    try:
-        size = Path(path).stat().st_size
-    except FileNotFoundError:
-        return None, [YML401(f"no such file: {file}", whole)]
-    except OSError as exc:
-        return None, [YML401(f"cannot read {file}: {exc.strerror}", whole)]
-    if Path(path).is_dir():
-        return None, [YML401(f"{file} is a directory, not a YAML file", whole)]
-    if size > MAX_BYTES:
-        return None, [YML402(f"file is {size / 1e6:.1f} MB; the limit is {MAX_BYTES / 1e6:.1f} MB", whole,
-                             hint="maps and scenarios are small; generate traffic with 'populations' instead of listing it")]
-    try:
-        raw = Path(path).read_bytes()
-    except OSError as exc:
-        return None, [YML401(f"cannot read {file}: {exc.strerror}", whole)]
+    raw, refusal = read_regular(path, MAX_BYTES)
+    if raw is None:
+        assert refusal is not None
+        if refusal.kind == "missing":
+            return None, [YML401(f"no such file: {file}", whole)]
+        if refusal.kind == "directory":
+            return None, [YML401(f"{file} is a directory, not a YAML file", whole)]
+        if refusal.kind == "special":
+            return None, [YML401(f"{file} is not a regular file: it is {refusal.detail}", whole,
+                                 hint="give the path of a YAML file")]
+        if refusal.kind == "too-large":
+            return None, [YML402(f"file is {(refusal.size or 0) / 1e6:.1f} MB; the limit is {MAX_BYTES / 1e6:.1f} MB", whole,
+                                 hint="maps and scenarios are small; generate traffic with 'populations' instead of listing it")]
+        return None, [YML401(f"cannot read {file}: {refusal.detail}", whole)]
     nul = raw.find(b"\x00")
     if nul >= 0:
         line, col = _line_of_offset(raw, nul)

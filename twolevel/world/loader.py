@@ -196,8 +196,9 @@ def _read_kind(path: Path, expected: Kind, referrer: Span | None,
     doc, diags = read_document(_display(path))
     if doc is None:
         if referrer is not None and diags and diags[0].code == "YML401":
-            return None, [YML418(f"referenced file not found: {_display(path)}", referrer,
-                                 hint="paths are relative to the file that names them")]
+            missing = diags[0].message.startswith("no such file")
+            what = f"referenced file not found: {_display(path)}" if missing else f"referenced file unusable: {diags[0].message}"
+            return None, [YML418(what, referrer, hint="paths are relative to the file that names them")]
         return None, diags
     kind = file_kind(doc.data)
     if kind != expected:
