@@ -287,3 +287,28 @@ def test_shared_reader_reads_at_most_the_limit(tmp_path: Path) -> None:
     assert data is None and refusal is not None and refusal.kind == "too-large" and refusal.size == 100
     assert read_regular(tmp_path / "nope", 10)[1].kind == "missing"
     assert read_regular(tmp_path, 10)[1].kind == "directory"
+
+
+@pytest.mark.parametrize(
+    "goal, words",
+    [
+        ("goal: {lane: r, s: 5}", "0 m long"),  # the goal is the start: spacing 0, divisions by zero
+        ("goal: {lane: r, s: 5.3}", "0.3 m long"),
+        ("goal: {lane: r, s: 2}", "behind the start"),  # used to say "no way from lane 'r' to lane 'r'"
+        ("goal: {lane: r, s: 2}\n  via: [r]", "-3 m long"),
+    ],
+)
+def test_route_too_short_or_backwards_is_refused_at_the_goal(tmp_path: Path, goal: str, words: str) -> None:
+    write(tmp_path, "map.yaml", MAP)
+    p = write(tmp_path, "scn.yaml", SCENARIO.replace("goal: {lane: next, s: 45}", goal, 1))
+    scn, diags = load_scenario(p)
+    assert scn is None and codes_lines(diags) == [("YML420", 8)], diags
+    assert words in diags[0].message and diags[0].span.column > 1
+    assert check_world_file(p) != []
+
+
+def test_short_route_on_the_next_lane_is_measured_across_lanes(tmp_path: Path) -> None:
+    write(tmp_path, "map.yaml", MAP)
+    p = write(tmp_path, "scn.yaml", SCENARIO.replace("goal: {lane: next, s: 45}", "goal: {lane: next, s: 0.5}", 1))
+    scn, diags = load_scenario(p)
+    assert diags == [] and scn is not None  # 100 m + a 50 m-radius quarter arc - 5 m + 0.5 m: long enough

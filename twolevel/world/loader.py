@@ -345,6 +345,26 @@ def _route_lanes(spec: ScenarioFile, succ: dict[str, list[str]]) -> list[str] | 
     return None
 
 
+MIN_ROUTE_LENGTH = 1.0
+"""Shortest route accepted [m] (and at least two reference points, one ``spacing`` apart)."""
+
+
+def _check_route_length(spec: ScenarioFile, lanes: list[str], lengths: dict[str, float], doc: Document) -> list[Diagnostic]:
+    """YML420 at the goal when the route from start to goal along ``lanes`` is too short to
+    follow (a goal on the start: zero length, reference spacing 0, divisions by zero)."""
+    r = spec.route
+    if len(lanes) == 1:
+        length = r.goal.s - r.start.s
+    else:
+        length = lengths[lanes[0]] - r.start.s + sum(lengths[x] for x in lanes[1:-1]) + r.goal.s
+    least = max(MIN_ROUTE_LENGTH, r.spacing)
+    if length >= least:
+        return []
+    return [YML420(f"the route from start to goal is {length:g} m long; it must be at least {least:g} m",
+                   doc.locate(("route", "goal", "s"), value=True),
+                   hint="the goal is (almost) at the start: move it further along the lanes")]
+
+
 def _check_scenario(spec: ScenarioFile, doc: Document, m: MapFile) -> list[Diagnostic]:
     out: list[Diagnostic] = []
     lengths = lane_lengths(m)
@@ -356,7 +376,11 @@ def _check_scenario(spec: ScenarioFile, doc: Document, m: MapFile) -> list[Diagn
         if lane not in lengths:
             out.append(YML416(f"no lane '{lane}' in the map", doc.locate(("route", "via", k), value=True),
                               hint=_suggest(lane, lengths)))
-    if not out:
+    behind = r.via is None and r.start.lane == r.goal.lane and r.goal.s < r.start.s
+    if not out and behind:
+        out.append(YML420("the goal is behind the start on the same lane", doc.locate(("route", "goal", "s"), value=True),
+                          hint=f"put the goal ahead of s = {r.start.s:g} m, or route via other lanes with 'via'"))
+    elif not out:
         lanes = _route_lanes(spec, succ)
         if lanes is None:
             out.append(YML420(f"no way from lane '{r.start.lane}' to lane '{r.goal.lane}' along lane successors",
@@ -369,8 +393,8 @@ def _check_scenario(spec: ScenarioFile, doc: Document, m: MapFile) -> list[Diagn
                 if y not in succ.get(x, []):
                     out.append(YML420(f"lane '{y}' does not follow lane '{x}' in the map",
                                       doc.locate(("route", "via", k + 1), value=True)))
-        elif len(lanes) == 1 and r.goal.s < r.start.s:
-            out.append(YML420("the goal is behind the start on the same lane", doc.locate(("route", "goal", "s"), value=True)))
+        if lanes is not None and not out:
+            out += _check_route_length(spec, lanes, lengths, doc)
     if spec.ego.start.lane is not None:
         out += _check_lane_pos(spec.ego.start.lane, spec.ego.start.s, ("ego", "start"), doc, lengths)
     ids: list[tuple[str, Path_]] = [("ego", ())]
