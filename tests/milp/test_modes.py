@@ -76,3 +76,23 @@ def test_bnb_to_completion_is_the_best_mode_on_quadratic_costs(seed: int) -> Non
     assert r.cost == pytest.approx(best, rel=1e-6, abs=1e-6)
     # the heuristic phase alone (no B&B) finds a feasible mode whenever one exists
     assert np.isfinite(ms.run(budget_ms=None, bnb=False).cost) or r.nodes > 0
+
+
+def test_adopted_readoff_is_that_modes_optimum() -> None:
+    """When the lower bound's point already satisfies the read-off mode, the search takes it
+    without a second QP: it must be what solving that mode gives, and feasible."""
+    adopted = 0
+    for seed in range(60):
+        m, enc = _model(seed, quadratic=True, depth=2)
+        if enc.infeasible or any(d.is_error for d in enc.diagnostics):
+            continue
+        ms = ModeSearch(FixedModeQP(m))
+        r = ms.run(budget_ms=None, bnb=False)
+        if ms.D == 0 or r.x is None or r.qps != 1:
+            continue
+        adopted += 1
+        ms._memo.clear()
+        c, _, _ = ms.solve_mode(r.mode)
+        assert r.cost == pytest.approx(c, rel=1e-6, abs=1e-6)
+        assert m.violation(r.x) <= 1e-6
+    assert adopted >= 5
