@@ -189,3 +189,15 @@ def test_every_code_is_covered() -> None:
         expected, _ = _expectations(path.read_text(encoding="utf-8"))
         covered |= {e.split("@")[0] for e in expected}
     assert covered == {c.id for c in codes.ALL}
+
+
+@pytest.mark.parametrize("value", [float("nan"), float("inf"), -float("inf")])
+def test_binding_a_non_finite_constant_is_refused(tmp_path: Path, value: float) -> None:
+    p = tmp_path / "r.stl"
+    p.write_text("input float v\nconst float tol\nr = always[0:1] (v <= tol);\n")
+    rs, diags = load_ruleset(str(p), {"tol": value})
+    assert rs is None and [d.code for d in diags] == ["STL222"] and "tol" in diags[0].message
+    ok, _ = load_ruleset(str(p), {"tol": 1.0})
+    assert ok is not None
+    with pytest.raises(ValueError, match="finite"):
+        ok.bind({"tol": value})

@@ -312,3 +312,16 @@ def test_short_route_on_the_next_lane_is_measured_across_lanes(tmp_path: Path) -
     p = write(tmp_path, "scn.yaml", SCENARIO.replace("goal: {lane: next, s: 45}", "goal: {lane: next, s: 0.5}", 1))
     scn, diags = load_scenario(p)
     assert diags == [] and scn is not None  # 100 m + a 50 m-radius quarter arc - 5 m + 0.5 m: long enough
+
+
+@pytest.mark.parametrize("value", [".nan", ".inf", "-.inf", "1e999"])
+def test_non_finite_rule_constant_is_refused_at_its_value(tmp_path: Path, value: str) -> None:
+    write(tmp_path, "map.yaml", MAP)
+    (tmp_path / "speed.stl").write_text("input float v\nconst float tol\nr = always[0:1] (v <= 10 + tol);\n")
+    rules = "rules:\n  - file: speed.stl\n    constants: {tol: " + value + "}"
+    p = write(tmp_path, "scn.yaml", SCENARIO.replace("rules: []", rules, 1))
+    scn, diags = load_scenario(p)
+    assert scn is None and codes_lines(diags) == [("YML414", 13)], diags
+    assert "finite" in diags[0].message and diags[0].span.column == 22  # the value, not the key
+    ok = write(tmp_path, "ok.yaml", SCENARIO.replace("rules: []", rules.replace(value, "0.5"), 1))
+    assert load_scenario(ok)[1] == []

@@ -6,6 +6,7 @@ call to get a :class:`~twolevel.stl.typecheck.RuleSet`. It imports no numpy.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Mapping
 
@@ -92,6 +93,12 @@ def load_ruleset(
                                   hint=f"constants: {', '.join(rs.consts) or 'none'}"))
     if unknown:
         return None, diags
+    bad = [name for name, value in consts.items() if not math.isfinite(float(value))]
+    for name in bad:
+        diags.append(codes.STL222(f"constant '{name}' is bound to {float(consts[name])!r}, not a finite number", whole,
+                                  hint="bind it to a finite number"))
+    if bad:
+        return None, [d for d in diags if d.code != codes.STL217.id]
     rs = rs.bind(consts)
     diags = [d for d in diags if d.code != codes.STL217.id]
     for name in rs.unbound:

@@ -86,10 +86,14 @@ class RuleSet:
 
     def bind(self, values: Mapping[str, float]) -> "RuleSet":
         """A copy with constants set or overridden; a name that is not a constant is a
-        ``KeyError``."""
+        ``KeyError``, a value that is not finite (inf, NaN) a ``ValueError``."""
         unknown = sorted(set(values) - set(self.consts))
         if unknown:
             raise KeyError(f"not a constant of {self.file}: {', '.join(unknown)}")
+        bad = sorted(k for k, v in values.items() if not math.isfinite(float(v)))
+        if bad:
+            raise ValueError(f"constants of {self.file} must be finite numbers: "
+                             + ", ".join(f"{k} = {float(values[k])!r}" for k in bad))
         merged = dict(self.consts)
         merged.update({k: float(v) for k, v in values.items()})
         return replace(self, consts=MappingProxyType(merged))
@@ -366,6 +370,10 @@ def _const_value(d: Declaration, consts: Mapping[str, float | None], ck: _Checke
     if isinstance(folded, Num) and math.isfinite(folded.value):
         return folded.value
     bad = sorted({n.name for n in folded.walk() if isinstance(n, Var)})
+    if not bad:  # numbers only, yet no finite number: an overflow or a division by zero
+        ck.diags.append(codes.STL222(f"the value of constant '{d.name}' is not a finite number (infinite or NaN)",
+                                     _span(d.value, ck.file), hint="a constant must be a finite number"))
+        return None
     why = f"it reads {', '.join(repr(b) for b in bad)}" if bad else "it does not evaluate to a finite number"
     ck.diags.append(codes.STL218(f"the value of constant '{d.name}' is not a constant: {why}", _span(d.value, ck.file),
                                  hint="a constant's value may use numbers and earlier constants that have values"))

@@ -171,7 +171,10 @@ def validation_diagnostics(exc: ValidationError, doc: Document, root: type[BaseM
         elif kind == "literal_error":
             msg = f"'{where}' must be {ctx.get('expected')} (got {_shown(err.get('input'))})"
             out.append(YML415(msg, doc.locate(loc, value=True), hint=desc or None))
-        elif kind.endswith(("_type", "_parsing")) or kind in ("bool_parsing", "int_from_float", "finite_number"):
+        elif kind == "finite_number":
+            msg = f"'{where}' must be a finite number{_unit(desc)} (got {_shown(err.get('input'))})"
+            out.append(YML414(msg, doc.locate(loc, value=True), hint=desc or None))
+        elif kind.endswith(("_type", "_parsing")) or kind in ("bool_parsing", "int_from_float"):
             base = kind.rsplit("_", 1)[0] if kind != "int_from_float" else "int"
             words = _TYPE_WORDS.get(base, base.replace("_", " "))
             msg = f"'{where}' must be {words}{_unit(desc)} (got {_shown(err.get('input'))})"

@@ -16,7 +16,7 @@ Imported by ``twolevel check``: pydantic and the standard library only (no numpy
 from __future__ import annotations
 
 import math
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
@@ -308,7 +308,8 @@ class RuleRef(_Model):
     """A rule file and the values of its constants."""
 
     file: str = Field(min_length=1, description="path of the .stl file, relative to the scenario")
-    constants: dict[str, float] = Field(default_factory=dict, description="constant name → value")
+    constants: dict[str, Annotated[float, Field(allow_inf_nan=False)]] = Field(
+        default_factory=dict, description="constant name → value (a finite number)")
 
     @model_validator(mode="before")
     @classmethod
