@@ -258,3 +258,38 @@ def test_fifo_and_device_are_refused_without_blocking(tmp_path: Path) -> None:
     if Path("/dev/zero").exists():
         trace, diags = read_trace("/dev/zero")
         assert trace is None and _codes(diags) == [("SIM605", 1, 1)] and "device" in diags[0].message
+
+
+def test_header_and_cell_positions_cost_linear_work_in_the_number_of_columns(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # 100,000 columns took over a minute: each cell's column was a fresh O(j) sum.
+    from twolevel.monitor import tracefile
+
+    work = [0]
+
+    def counted(name: str, cost) -> None:
+        real = getattr(tracefile, name, None)
+        if real is not None:
+            def wrapper(*args):
+                work[0] += cost(*args)
+                return real(*args)
+            monkeypatch.setattr(tracefile, name, wrapper)
+
+    counted("_cell_column", lambda row, j: j)  # the old per-cell helper, if present
+    counted("_cell_columns", lambda row: len(row))
+
+    def run(n: int) -> int:
+        work[0] = 0
+        names = ",".join(f"c{k}" for k in range(n))
+        path = _write(tmp_path, f"t,{names}\n0,{','.join(['x'] * n)}\n0.1,{','.join(['1'] * n)}\n", f"w{n}.csv")
+        trace, diags = read_trace(path)
+        assert trace is not None and diags == []
+        unusable = [d for d in tracefile._read_rows(path, [])[3].values()]
+        assert len(unusable) == n
+        last = unusable[-1].span
+        assert last.line == 2 and last.column == 3 + 2 * (n - 1)  # "0," then "x," per column
+        return work[0]
+
+    small, large = run(1000), run(4000)
+    assert large <= 4.5 * small, (small, large)

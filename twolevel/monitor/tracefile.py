@@ -21,6 +21,7 @@ import contextlib
 import csv
 import difflib
 import io
+import itertools
 import math
 import os
 from array import array
@@ -101,9 +102,10 @@ class MonitorReport:
 # --------------------------------------------------------------------------------- reading
 
 
-def _cell_column(row: Sequence[str], j: int) -> int:
-    """1-based character column of cell ``j`` (exact for unquoted rows)."""
-    return 1 + sum(len(c) + 1 for c in row[:j])
+def _cell_columns(row: Sequence[str]) -> list[int]:
+    """1-based character column of every cell, exact for unquoted rows (prefix sums: O(len(row))
+    for the whole row, where one sum per cell was quadratic in the number of columns)."""
+    return list(itertools.accumulate((len(c) + 1 for c in row[:-1]), initial=1))
 
 
 def _read_rows(
@@ -174,6 +176,7 @@ def _read_open(
                     )
                     errors += 1
                 else:
+                    where: list[int] | None = None  # cell columns, computed once per row if needed
                     for j, cell in enumerate(row):
                         text = cell.strip()
                         try:
@@ -184,7 +187,9 @@ def _read_open(
                         else:
                             what = "is NaN" if math.isnan(value) else ""
                         if what and header[j] not in unusable:
-                            col = _cell_column(row, j)
+                            if where is None:
+                                where = _cell_columns(row)
+                            col = where[j]
                             unusable[header[j]] = SIM603(
                                 f"cell in column '{header[j]}' {what}",
                                 Span(path, line, col, line, col + max(len(cell), 1)),
@@ -240,8 +245,9 @@ def _first_non_utf8_line(fh: BinaryIO) -> int:
 def _check_header(path: str, line: int, row: list[str], header: list[str], diags: list[Diagnostic]) -> bool:
     ok = True
     seen: set[str] = set()
+    columns = _cell_columns(row)
     for j, name in enumerate(header):
-        col = _cell_column(row, j)
+        col = columns[j]
         span = Span(path, line, col, line, col + max(len(row[j]), 1))
         if not name:
             diags.append(SIM606(f"column {j + 1} of the header has no name", span))
