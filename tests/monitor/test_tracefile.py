@@ -293,3 +293,33 @@ def test_header_and_cell_positions_cost_linear_work_in_the_number_of_columns(
 
     small, large = run(1000), run(4000)
     assert large <= 4.5 * small, (small, large)
+
+
+def test_many_rules_cost_linear_set_up(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # 29,206 rules took over a minute: every rule re-checked and re-converted all earlier ones.
+    from twolevel.monitor import robustness as R
+
+    work = [0]
+    real = R._trace_length
+
+    def counted(signals, rules):
+        work[0] += len(signals) + len(rules)
+        return real(signals, rules)
+
+    monkeypatch.setattr(R, "_trace_length", counted)
+    trace, diags = read_trace(_write(tmp_path, "t,v\n0,1\n0.1,2\n0.2,3\n"))
+    assert trace is not None
+
+    def run(n: int) -> int:
+        work[0] = 0
+        rules = [A.Rule(name="r0", formula=A.Compare("<=", A.Var("v"), A.Num(2.5)))]
+        rules += [A.Rule(name=f"r{k}", formula=A.Not(A.Var(f"r{k - 1}"))) for k in range(1, n)]
+        report, diags = monitor_trace(rules, {}, trace)
+        assert diags == [] and len(report.rules) == n
+        assert report.rules[-1].robustness == (1.5 if n % 2 else -1.5)
+        out = R.evaluate_rules(rules, trace.columns, trace.dt)
+        assert float(out[f"r{n - 1}"][0]) == report.rules[-1].robustness
+        return work[0]
+
+    small, large = run(200), run(800)
+    assert large <= 4.5 * small, (small, large)

@@ -34,7 +34,7 @@ from twolevel.diagnostics import Diagnostic, Severity, Span
 from twolevel.files import open_regular
 from twolevel.monitor.codes import SIM601, SIM602, SIM603, SIM604, SIM605, SIM606, SIM607, SIM608
 from twolevel.monitor.errors import MonitorError
-from twolevel.monitor.robustness import DEFAULT_BUILTINS, Builtin, robustness
+from twolevel.monitor.robustness import DEFAULT_BUILTINS, Builtin, TraceEvaluator
 from twolevel.stl import ast
 
 __all__ = [
@@ -415,17 +415,21 @@ def monitor_trace(
     builtins = DEFAULT_BUILTINS if builtins is None else builtins
     diags: list[Diagnostic] = []
     report_rules: list[RuleVerdict] = []
-    done: dict[str, np.ndarray] = {}
     failed: set[str] = set()
     known = list(trace.columns)
     whole = Span.whole_file(trace.path)
     if trace.samples == 0:
         diags.append(SIM604("the trace has no samples", whole))
         return MonitorReport(trace.path, trace.dt, 0, ()), diags
+    skip = set(consts) | {r.name for r in rules}  # once: per rule it made R rules cost O(R²)
+    evaluator: TraceEvaluator | MonitorError
+    try:
+        evaluator = TraceEvaluator(trace.columns, trace.dt, consts=consts, builtins=builtins)
+    except MonitorError as exc:  # e.g. no signal column: every rule that gets to run reports it
+        evaluator = exc
     for rule in rules:
-        rule_names = {r.name for r in rules}
         missing = []
-        for node in _reads(rule.formula, set(consts) | rule_names):
+        for node in _reads(rule.formula, skip):
             names = [node.name] if isinstance(node, ast.Var) else list(BUILTIN_SIGNALS.get(node.name, ()))
             for name in names:
                 if name in trace.unusable and name not in missing:
@@ -449,13 +453,15 @@ def monitor_trace(
             failed.add(rule.name)
             continue
         try:
+            if isinstance(evaluator, MonitorError):
+                raise evaluator
             with np.errstate(all="ignore"):
-                rob = robustness(rule.formula, trace.columns, trace.dt, consts=consts, rules=done, builtins=builtins)
+                rob = evaluator.evaluate(rule.formula)
+            evaluator.add(rule.name, rob)
         except MonitorError as exc:
             diags.append(SIM607(f"rule '{rule.name}': {exc.message}", rule.name_span or rule.span or whole))
             failed.add(rule.name)
             continue
-        done[rule.name] = rob
         neg = np.flatnonzero(rob < 0)
         report_rules.append(
             RuleVerdict(
