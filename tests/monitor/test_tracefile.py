@@ -323,3 +323,25 @@ def test_many_rules_cost_linear_set_up(tmp_path: Path, monkeypatch: pytest.Monke
 
     small, large = run(200), run(800)
     assert large <= 4.5 * small, (small, large)
+
+
+def test_missing_column_hint_is_computed_once_per_name(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # 4000 rules reading 'v' from a 100,000-column trace ran difflib 4000 times over every column.
+    from twolevel.monitor import tracefile
+
+    calls = [0]
+    real = tracefile.difflib.get_close_matches
+
+    def counted(*args, **kw):
+        calls[0] += 1
+        return real(*args, **kw)
+
+    monkeypatch.setattr(tracefile.difflib, "get_close_matches", counted)
+    names = ",".join(f"c{k}" for k in range(100))
+    trace, _ = read_trace(_write(tmp_path, f"t,{names}\n0,{','.join(['1'] * 100)}\n0.1,{','.join(['1'] * 100)}\n"))
+    assert trace is not None
+    rules = [A.Rule(name=f"r{k}", formula=A.Compare("<=", A.Var("v"), A.Num(k))) for k in range(50)]
+    report, diags = monitor_trace(rules, {}, trace)
+    assert report.rules == () and [d.code for d in diags] == ["SIM602"] * 50
+    assert calls[0] == 1
+    assert "(80 more)" in (diags[0].hint or "")

@@ -391,6 +391,14 @@ def _reads(formula: ast.Node, skip: set[str]) -> list[ast.Var | ast.Call]:
     ]
 
 
+def _listed(names: Sequence[str], most: int = 20) -> str:
+    """``names`` for a hint, the first ``most`` of them (a trace may have 100,000 columns)."""
+    if not names:
+        return "(none)"
+    more = f", … ({len(names) - most} more)" if len(names) > most else ""
+    return ", ".join(names[:most]) + more
+
+
 def _finite(x: float) -> Any:
     if math.isnan(x):
         return None
@@ -421,6 +429,7 @@ def monitor_trace(
     if trace.samples == 0:
         diags.append(SIM604("the trace has no samples", whole))
         return MonitorReport(trace.path, trace.dt, 0, ()), diags
+    hints: dict[str, str] = {}
     skip = set(consts) | {r.name for r in rules}  # once: per rule it made R rules cost O(R²)
     evaluator: TraceEvaluator | MonitorError
     try:
@@ -438,8 +447,10 @@ def monitor_trace(
                     diags.append(replace(bad, message=f"rule '{rule.name}' reads signal '{name}': {bad.message}"))
                 elif name not in trace.columns and name not in missing:
                     missing.append(name)
-                    close = difflib.get_close_matches(name, known, n=1, cutoff=0.6)
-                    hint = f"did you mean '{close[0]}'?" if close else f"the trace has columns: {', '.join(known) or '(none)'}"
+                    if name not in hints:  # once per name: O(columns) each, and many rules may read it
+                        close = difflib.get_close_matches(name, known, n=1, cutoff=0.6)
+                        hints[name] = f"did you mean '{close[0]}'?" if close else f"the trace has columns: {_listed(known)}"
+                    hint = hints[name]
                     diags.append(
                         SIM602(
                             f"rule '{rule.name}' reads signal '{name}', but the trace {os.path.basename(trace.path)} "
