@@ -73,15 +73,17 @@ def main() -> None:
             ref = key if ref is None else ref
     decisions = np.array([c[3] for c in calls])
     print(f"{args.scenario}: {len(calls)} steps, fastest of {args.repeat}; same decisions in every setting: {same}")
-    print(f"{'decision':<16} {'n':>4} " + " ".join(f"{'screen=' + str(s):>26}" for s in SETTINGS))
+    print("median/p99/max ms per step (median ratio to the first setting); worst per-step ratio: "
+          + ", ".join(f"{SETTINGS[s]}: {np.max(times[s] / times[0]):.2f}x" for s in range(1, len(SETTINGS))))
+    print(f"{'decision':<16} {'n':>4} " + " ".join(f"{'screen=' + str(s):>30}" for s in SETTINGS))
     for dec in ["all"] + sorted(set(decisions)):
         m = np.ones(len(calls), bool) if dec == "all" else decisions == dec
         cells = []
         for s in range(len(SETTINGS)):
-            med, mx = np.median(times[s, m]), times[s, m].max()
+            med, p99, mx = np.median(times[s, m]), np.percentile(times[s, m], 99), times[s, m].max()
             ratio = med / max(np.median(times[0, m]), 1e-9)
-            cells.append(f"{med:7.2f}/{mx:7.2f} ms ({ratio:4.2f}x)")
-        print(f"{dec:<16} {int(m.sum()):4d} " + " ".join(f"{c:>26}" for c in cells))
+            cells.append(f"{med:6.2f}/{p99:6.2f}/{mx:6.2f} ({ratio:4.2f}x)")
+        print(f"{dec:<16} {int(m.sum()):4d} " + " ".join(f"{c:>30}" for c in cells))
 
 
 if __name__ == "__main__":

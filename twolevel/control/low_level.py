@@ -40,20 +40,27 @@ space of the paper's CARLA controls, where r = 0.3), clipped to the actuator lim
 is seeded per step from the run's seed (``numpy.random.default_rng((seed, step))``) and runs in
 rounds (32, 64, then the rest of the budget) so the usual case costs one small batch.
 
-**Screening on prefixes** (``screen`` = cuts j, default 3 then 6 steps; exact). When every rule is *prefix-bounded* —
-built from pointwise predicates, past operators, ``and``/``or``, ``always`` and ``next`` (no
-``eventually``/``until``/``unless`` and no negation above a future operator;
-:func:`prefix_bounded`) — its robustness at k = 1 on the trace cut after the predicted sample j
-is an upper bound of its robustness on the whole prediction (``always`` over fewer samples, each
-signal at k ≤ j the same: the rollout and the signals are causal). So each round first rolls
-every candidate out over j steps only and drops those a rule already rejects there; the
-survivors are continued from their state at j (bit-identical to rolling out the whole horizon)
-and judged in full. Which candidate is chosen, its robustness and the count of candidates tried
-do not change; an intervention where nothing satisfies (the full brake) costs about j / H of
-the rollouts instead of all of them, for one more signals and monitor pass per cut. When the car is (almost) standing and the least-violating
-choice is enabled, that choice needs the exact worst robustness of the best candidate: a dropped
-candidate whose prefix bound beats the best so far (strictly) and reaches the round's best
-judged one is judged in full as well (branch and bound; the others cannot be chosen).
+**Screening on prefixes** (``screen``: cuts j, default one at 3 steps; exact). When every rule
+is *prefix-bounded* — built from pointwise predicates, past operators, ``and``/``or``,
+``always`` and ``next`` (no ``eventually``/``until``/``unless`` and no negation above a future
+operator; :func:`prefix_bounded`) — its robustness at k = 1 on the trace cut after the predicted
+sample j is an upper bound of its robustness on the whole prediction (``always`` over fewer
+samples, each signal at k ≤ j the same: the rollout and the signals are causal). So each round
+first rolls every candidate out over j steps only and drops those a rule already rejects there
+(with more cuts, continues the survivors to the next cut and drops again; on scalability a
+second cut at 6 did not pay for its extra judgement); the survivors are continued from their
+state at the last cut (bit-identical to rolling out the whole horizon) and judged in full. The
+step's later rounds are screened only while screening drops something. Which candidate is
+chosen, its robustness and the count of candidates tried do not change; an intervention where
+nothing satisfies (the full brake) costs about j / H of the rollouts instead of all of them,
+for one more signals and monitor pass per cut.
+
+When the car is (almost) standing and the least-violating choice is enabled, that choice needs
+the exact worst robustness of the best candidate: a dropped candidate whose prefix bound beats
+the best so far (strictly) and reaches the round's best judged one (on a tie only from a lower
+index: argmax takes the first) is judged in full as well, best bound first in growing batches,
+the threshold rising as they are judged (branch and bound; the others cannot be chosen); when
+that judges more than half a round, the step's later rounds are not screened.
 
 **Cost of a candidate** (lower is better): Σ_{k=1..H} ‖p_k − p̂_k‖² + (v_k − v̂_k)² — the
 distance of its detailed trajectory from the MPC's planned one (p̂, v̂: ``target``; the plan
@@ -108,7 +115,7 @@ class LowLevelSettings:
     delta_max: float = 0.5
     backend: Backend = "auto"
     least_violation: bool = True
-    screen: tuple[int, ...] = (3, 6)
+    screen: tuple[int, ...] = (3,)
 
     def round_sizes(self) -> list[int]:
         """Candidates per round, summing to ``samples``."""
@@ -338,11 +345,19 @@ class LowLevelController:
                 # robustness) beats the best's (strictly) and reaches the round's best judged
                 # one (on a tie, only from a lower index): judge those in full too (NaN: judge)
                 b = best[0] if best is not None else -np.inf
-                valid = ~np.isnan(worst)
-                m = float(np.max(worst[valid], initial=-np.inf))
-                jm = int(idx[np.flatnonzero(valid & (worst == m))[0]]) if np.isfinite(m) else len(cand)
-                extra = np.flatnonzero(~keep & ~(bound <= b) & ~(bound < m) & ~((bound == m) & (np.arange(k) > jm)))
-                if len(extra):
+                pool = np.flatnonzero(~keep & ~(bound <= b))
+                pool = pool[np.lexsort((pool, -np.nan_to_num(bound[pool], nan=np.inf)))]  # best bound first
+                size, judged = 4, 0
+                while len(pool):
+                    valid = ~np.isnan(worst)
+                    m = float(np.max(worst[valid], initial=-np.inf))
+                    jm = int(idx[np.flatnonzero(valid & (worst == m))[0]]) if np.isfinite(m) else k
+                    bp = bound[pool]
+                    pool = pool[~(bp < m) & ~((bp == m) & (pool > jm))]
+                    extra, pool = pool[:size], pool[size:]
+                    if not len(extra):
+                        break
+                    size, judged = size * 4, judged + len(extra)
                     t0 = time.perf_counter()
                     more = rollout(x0, cand[extra], dt, p, st.backend).states
                     tm["rollout"] += (time.perf_counter() - t0) * 1e3
@@ -352,6 +367,8 @@ class LowLevelController:
                     states = np.concatenate([states, more])[order]
                     rob = {n: (np.concatenate([rob[n], v]) if rob else v)[order] for n, v in rob_e.items()}
                     worst = np.min(np.stack(list(rob.values())), axis=0)
+                if 2 * judged > k:
+                    screen = False  # the bounds are loose here: the next rounds are judged in full directly
             if len(idx) and (bound is None or exact_worst):
                 j = int(np.argmax(worst))
                 if best is None or worst[j] > best[0]:
