@@ -241,3 +241,39 @@ run: {duration: 30, seed: 0}
     with open(tmp_path / "run" / "trace.csv", newline="") as f:
         last = list(csv.DictReader(f))[-1]
     assert abs(float(last["s"]) - 30.0) <= 1.0 and float(last["v"]) <= 0.1   # at the goal, not past it
+
+
+def test_a_full_disk_is_a_diagnostic_and_keeps_what_was_written(tmp_path, monkeypatch) -> None:
+    """ENOSPC while writing used to end in 'internal error' and a stray temporary (review)."""
+    import errno
+
+    from twolevel.sim import trace as trace_mod
+    from twolevel.sim.engine import simulate_scenario
+
+    real_write = trace_mod.TraceWriter.write
+
+    def write(self, row):  # noqa: ANN001
+        if self.rows >= 5:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        real_write(self, row)
+
+    monkeypatch.setattr(trace_mod.TraceWriter, "write", write)
+    scenario = str(Path(__file__).resolve().parents[2] / "scenarios" / "traffic_rules.yaml")
+    summary, diags = simulate_scenario(scenario, str(tmp_path / "run"), duration=2.0)
+    assert summary is not None and summary.status == "crashed"
+    assert any(d.code == "SIM615" and "No space left" in d.message for d in diags)
+    assert (tmp_path / "run" / "trace.csv").read_text().count("\n") == 1 + 5
+    assert not list((tmp_path / "run").glob(".*tmp"))
+
+
+def test_nan_robustness_does_not_count_as_holding() -> None:
+    import numpy as np
+
+    from twolevel.sim.summary import summarise
+
+    s = summarise(scenario="s", run_dir="d", status="complete", monitor=True, controller="twolevel", seed=0, dt=0.1,
+                  wall_time_s=1.0, step_ms=[1, 1, 1], high_ms=[1, 1, 1], low_ms=[0, 0, 0], tracking=[0, 0, 0],
+                  over_limit=[0, 0, 0], min_dist=[9, 9, 9], min_gap=[5, 5, 5], decisions=["mpc"] * 3, collisions=[],
+                  robustness={"r": np.array([1.0, np.nan, 2.0])})
+    [v] = s.violations
+    assert v.steps == 1 and v.first_t == 0.1

@@ -259,14 +259,22 @@ class _Loop:
                 writer.meta["summary"] = self._summary(out_dir, "complete").to_json()
         except KeyboardInterrupt:
             status = "interrupted"
+        except OSError as exc:  # the disk is full, or the run directory went away
+            status, error = "unwritable", f"{type(exc).__name__}: {exc}"
         except Exception as exc:  # an internal error: keep the run, say what happened
             status, error = "crashed", f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}"
         finally:
             if fw_writer is not None:
-                fw_writer.close()
-        summary = self._summary(out_dir, status)
+                try:
+                    fw_writer.close()
+                except OSError as exc:
+                    status, error = "unwritable", error or f"{type(exc).__name__}: {exc}"
+        summary = self._summary(out_dir, "crashed" if status == "unwritable" else status)
         where = Span.whole_file(self.scn.path)
-        if status == "interrupted":
+        if status == "unwritable":
+            diags.append(SIM615(f"cannot write the run directory {out_dir}: {error}", where,
+                                hint="free disk space or choose another --out; the steps written so far are kept"))
+        elif status == "interrupted":
             diags.append(SIM612(f"interrupted after {summary.steps} steps ({summary.duration:g} s)", where,
                                 hint=f"the completed steps are in {out_dir}"))
         elif status == "crashed":
@@ -275,10 +283,13 @@ class _Loop:
             from twolevel.sim.trace import RUN_FILE, write_json_atomic
             import json
 
-            meta = json.loads((Path(out_dir) / RUN_FILE).read_text(encoding="utf-8"))
-            meta["traceback"] = error
-            meta["summary"] = summary.to_json()
-            write_json_atomic(Path(out_dir) / RUN_FILE, meta)
+            try:
+                meta = json.loads((Path(out_dir) / RUN_FILE).read_text(encoding="utf-8"))
+                meta["traceback"] = error
+                meta["summary"] = summary.to_json()
+                write_json_atomic(Path(out_dir) / RUN_FILE, meta)
+            except (OSError, ValueError) as exc:
+                diags.append(SIM615(f"cannot record the traceback in {RUN_FILE}: {exc}", where))
         for c in summary.collisions:
             diags.append(SIM614(f"collision with '{c.other}' at t = {c.t:.1f} s, ({c.x:.1f}, {c.y:.1f}) m, "
                                 f"overlap {-c.gap:.2f} m", where))

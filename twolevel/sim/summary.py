@@ -156,7 +156,7 @@ def summarise(
     viol = []
     for rule, rob in robustness.items():
         rob = np.asarray(rob, dtype=float)[:n]
-        bad = np.flatnonzero(rob < 0)
+        bad = np.flatnonzero(~(rob >= 0))  # a NaN robustness is no evidence the rule held
         viol.append(RuleViolations(rule, int(bad.size), float(bad[0] * dt) if bad.size else None,
                                    float(rob.min()) if rob.size else math.nan))
     total = float(st.sum())
