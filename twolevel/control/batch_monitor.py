@@ -152,20 +152,7 @@ class _Batch:
         raise MonitorError(f"no signal, constant or earlier rule named '{name}'", name)
 
     def run(self, root: ast.Node) -> np.ndarray:
-        memo: dict[int, np.ndarray] = {}
-        stack: list[tuple[ast.Node, bool]] = [(root, False)]
-        while stack:
-            node, ready = stack.pop()
-            if id(node) in memo:
-                continue
-            if not ready:
-                stack.append((node, True))
-                stack.extend((c, False) for c in node.children()
-                             if not isinstance(c, ast.Interval) and id(c) not in memo)
-                continue
-            args = [memo[id(c)] for c in node.children() if not isinstance(c, ast.Interval)]
-            memo[id(node)] = self.apply(node, args)
-        return np.array(memo[id(root)], dtype=np.float64)
+        return np.array(ast.fold(root, self.apply), dtype=np.float64)
 
     def apply(self, node: ast.Node, args: list[np.ndarray]) -> np.ndarray:  # noqa: C901 - dispatch
         if isinstance(node, ast.Num):

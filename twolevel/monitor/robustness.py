@@ -114,21 +114,7 @@ class _Evaluator:
 
     # -- evaluation (iterative post-order: deep formulas do not hit the recursion limit) ------
     def run(self, root: ast.Node) -> np.ndarray:
-        memo: dict[int, np.ndarray] = {}
-        stack: list[tuple[ast.Node, bool]] = [(root, False)]
-        while stack:
-            node, ready = stack.pop()
-            if id(node) in memo:
-                continue
-            if not ready:
-                stack.append((node, True))
-                for child in node.children():
-                    if not isinstance(child, ast.Interval) and id(child) not in memo:
-                        stack.append((child, False))
-                continue
-            args = [memo[id(c)] for c in node.children() if not isinstance(c, ast.Interval)]
-            memo[id(node)] = self.apply(node, args)
-        return memo[id(root)]
+        return ast.fold(root, self.apply)
 
     def apply(self, node: ast.Node, args: list[np.ndarray]) -> np.ndarray:  # noqa: C901 - a dispatch table
         n = self.n

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Iterator, Literal, Union
+from typing import Callable, Iterator, Literal, TypeVar, Union
 
 from twolevel.diagnostics import Span
 
@@ -279,3 +279,24 @@ class RuleFile(Node):
             if r.name == name:
                 return r
         return None
+
+
+_T = TypeVar("_T")
+
+
+def fold(root: Node, apply: Callable[[Node, list[_T]], _T]) -> _T:
+    """Evaluate a tree bottom-up: ``apply(node, values of its children)`` for every node, children
+    first, each shared subtree once (by identity); intervals are parameters, not children. Iterative,
+    so deep formulas do not reach the recursion limit. The monitors evaluate formulas with it."""
+    memo: dict[int, _T] = {}
+    stack: list[tuple[Node, bool]] = [(root, False)]
+    while stack:
+        node, ready = stack.pop()
+        if id(node) in memo:
+            continue
+        if not ready:
+            stack.append((node, True))
+            stack.extend((c, False) for c in node.children() if not isinstance(c, Interval) and id(c) not in memo)
+            continue
+        memo[id(node)] = apply(node, [memo[id(c)] for c in node.children() if not isinstance(c, Interval)])
+    return memo[id(root)]
