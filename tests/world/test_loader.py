@@ -197,7 +197,7 @@ def test_hostile_yaml_refused(tmp_path: Path, content: bytes, code: str | None, 
     p.write_bytes(content)
     start = time.perf_counter()
     m, diags = load_map(p)
-    assert time.perf_counter() - start < 1.0
+    assert time.perf_counter() - start < 15.0  # a hang guard (alias bombs, deep nesting), not a speed claim
     assert m is None and len(diags) == 1
     if code is not None:
         assert diags[0].code == code, diags
@@ -211,9 +211,13 @@ def test_enormous_file_refused_by_size(tmp_path: Path) -> None:
     p = tmp_path / "big.yaml"
     p.write_bytes(b"kind: map\n" + b"# padding padding padding padding\n" * 300_000)
     assert p.stat().st_size > 10_000_000
-    start = time.perf_counter()
+    import tracemalloc
+
+    tracemalloc.start()
     m, diags = load_map(p)
-    assert time.perf_counter() - start < 0.05
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert peak < 1_000_000  # refused by its size: the 10 MB were never read
     assert m is None and [d.code for d in diags] == ["YML402"]
 
 
