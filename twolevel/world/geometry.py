@@ -372,30 +372,6 @@ class Route(Polyline):
         cross = d[:, 0] * rel[:, 1] - d[:, 1] * rel[:, 0]
         return s, cross / np.sqrt(np.where(l2 > 0, l2, 1.0))
 
-    def _project_near_dense(self, points: np.ndarray, s_center: np.ndarray,
-                            half_window: float) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`project_near` onto every interval of each window (the reference the tests
-        compare the pruned search with)."""
-        pts = np.asarray(points, dtype=float).reshape(-1, 2)
-        n = len(self.s) - 1
-        w = min(int(math.ceil(2 * half_window / self.spacing)) + 2, n)
-        i0 = np.clip(np.floor((np.asarray(s_center, dtype=float) - half_window) / self.spacing).astype(int), 0, n - w)
-        idx = i0[:, None] + np.arange(w)[None, :]  # (M, W) interval indices
-        a = self.points[idx]
-        d = self.points[idx + 1] - a
-        l2 = np.einsum("mkj,mkj->mk", d, d)
-        rel = pts[:, None, :] - a
-        t_raw = np.einsum("mkj,mkj->mk", rel, d) / np.where(l2 > 0, l2, 1.0)
-        t = np.clip(t_raw, np.where(idx == 0, -np.inf, 0.0), np.where(idx == n - 1, np.inf, 1.0))
-        diff = rel - t[..., None] * d
-        dist2 = np.einsum("mkj,mkj->mk", diff, diff)
-        k = np.argmin(dist2, axis=1)
-        m = np.arange(len(pts))
-        i = idx[m, k]
-        s = self.s[i] + t[m, k] * (self.s[i + 1] - self.s[i])
-        cross = d[m, k, 0] * rel[m, k, 1] - d[m, k, 1] * rel[m, k, 0]
-        return s, cross / np.sqrt(np.where(l2[m, k] > 0, l2[m, k], 1.0))
-
     def reference(self, s0: float, v0: float, H: int, dt: float, a_max: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
         """Predicted route positions s_k [m] and speeds v_k [m/s], k = 0..H, advancing from
         (s0, v0) towards the desired speed with |acceleration| ≤ ``a_max`` [m/s²]."""
