@@ -4,118 +4,24 @@ Same semantics as the oracle :func:`twolevel.monitor.robustness.robustness` (RTA
 offline discrete-time monitor, windows truncated at the ends of the trace) — the tests check
 equality on random formulas — but every signal is a (K, T) array (candidates × samples, time
 along the last axis) or a (T,) array shared by all candidates. The window kernels are the
-oracle's (van Herk / Gil-Werman sliding min/max, clamp doubling for until/since) written along
-the last axis, so K candidates cost one pass of numpy calls instead of K.
+oracle's own (:mod:`twolevel.monitor.windows`, which work along the last axis), so K candidates
+cost one pass of numpy calls instead of K.
 """
 
 from __future__ import annotations
 
-from typing import Literal, Mapping, Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 
 from twolevel.monitor.errors import MonitorError
 from twolevel.monitor.robustness import DEFAULT_BUILTINS, Builtin
+from twolevel.monitor.windows import Kind, future_window, past_window, since, until
 from twolevel.stl import ast
 
 __all__ = ["robustness_batch", "evaluate_rules_batch"]
 
-Kind = Literal["min", "max"]
 _INF = np.inf
-
-
-def _op(kind: Kind) -> tuple[np.ufunc, float]:
-    return (np.minimum, _INF) if kind == "min" else (np.maximum, -_INF)
-
-
-def _sliding(x: np.ndarray, width: int, kind: Kind) -> np.ndarray:
-    """``out[:, i] = min|max(x[:, i : i + width])`` for ``i = 0 .. T - width``."""
-    K, n = x.shape
-    if width <= 1 or n == 0:
-        return x.copy()
-    if width > n:
-        return np.empty((K, 0))
-    op, ident = _op(kind)
-    blocks = -(-n // width)
-    padded = np.full((K, blocks * width), ident)
-    padded[:, :n] = x
-    grid = padded.reshape(K, blocks, width)
-    prefix = op.accumulate(grid, axis=2).reshape(K, -1)
-    suffix = op.accumulate(grid[:, :, ::-1], axis=2)[:, :, ::-1].reshape(K, -1)
-    m = n - width + 1
-    return op(suffix[:, :m], prefix[:, width - 1 : width - 1 + m])
-
-
-def future_window(x: np.ndarray, a: int, b: int | None, kind: Kind) -> np.ndarray:
-    """``out[:, i] = min|max(x[:, i+a .. min(i+b, T-1)])``; neutral where the window is empty."""
-    K, n = x.shape
-    op, ident = _op(kind)
-    out = np.full((K, n), ident)
-    if n == 0 or a >= n:
-        return out
-    if b is None:
-        acc = op.accumulate(x[:, ::-1], axis=1)[:, ::-1]
-        out[:, : n - a] = acc[:, a:]
-        return out
-    b = min(b, n + a)
-    padded = np.full((K, n + b + 1), ident)
-    padded[:, :n] = x
-    return _sliding(padded[:, a:], b - a + 1, kind)[:, :n]
-
-
-def past_window(x: np.ndarray, a: int, b: int | None, kind: Kind) -> np.ndarray:
-    """``out[:, i] = min|max(x[:, max(i-b, 0) .. i-a])``; neutral where the window is empty."""
-    return future_window(x[:, ::-1], a, b, kind)[:, ::-1].copy()
-
-
-def _until0(phi: np.ndarray, psi: np.ndarray, w: int) -> np.ndarray:
-    K, n = phi.shape
-    size = n + w
-    lp = np.full((K, size), -_INF)
-    lq = np.full((K, size), _INF)
-    lp[:, :n] = psi
-    lq[:, :n] = phi
-    rp = np.full((K, n), -_INF)
-    rq = np.full((K, n), _INF)
-    covered, step, remaining = 0, 1, w
-    while remaining:
-        if remaining & 1:
-            rp = np.maximum(rp, np.minimum(rq, lp[:, covered : covered + n]))
-            rq = np.minimum(rq, lq[:, covered : covered + n])
-            covered += step
-        remaining >>= 1
-        if remaining:
-            head = size - step
-            if head > 0:
-                new_p, new_q = lp.copy(), lq.copy()
-                new_p[:, :head] = np.maximum(lp[:, :head], np.minimum(lq[:, :head], lp[:, step:]))
-                new_q[:, :head] = np.minimum(lq[:, :head], lq[:, step:])
-                lp, lq = new_p, new_q
-            step <<= 1
-    last = np.full((K, n), -_INF)
-    tail = psi[:, w:]
-    last[:, : tail.shape[1]] = tail
-    return np.maximum(rp, np.minimum(rq, last))
-
-
-def until(phi: np.ndarray, psi: np.ndarray, a: int, b: int | None) -> np.ndarray:
-    """``phi until[a, b] psi`` along the last axis (RTAMT's truncation)."""
-    K, n = phi.shape
-    if n == 0:
-        return np.empty((K, 0))
-    w = n if b is None else b - a
-    core = _until0(phi, psi, min(w, n))
-    if a == 0:
-        return core
-    shifted = np.full((K, n), -_INF)
-    if a < n:
-        shifted[:, : n - a] = core[:, a:]
-    return np.minimum(future_window(phi, 0, a - 1, "min"), shifted)
-
-
-def since(phi: np.ndarray, psi: np.ndarray, a: int, b: int | None) -> np.ndarray:
-    """``phi since[a, b] psi`` along the last axis."""
-    return until(phi[:, ::-1], psi[:, ::-1], a, b)[:, ::-1].copy()
 
 
 class _Batch:
