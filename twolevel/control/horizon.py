@@ -157,12 +157,13 @@ def prepare_step(
     route = world.route
     x0 = np.asarray(x0, dtype=float)[:4].copy()
     if s_hint is not None and math.isfinite(s_hint):
-        s_arr, _ = route.project_near(x0[None, :2], np.array([s_hint]), 15.0)
+        s_arr, e_arr = route.project_near(x0[None, :2], np.array([s_hint]), 15.0)
     else:
-        s_arr, _ = route.local_coordinates(x0[None, :2])
+        s_arr, e_arr = route.local_coordinates(x0[None, :2])
     s0 = float(s_arr[0])
     s_ref, v_ref = route.reference(s0, max(float(x0[3]), 0.0), H, dt)
-    hc = horizon_constants(world, traffic, t, x0, H=H, dt=dt, s_pred=s_ref, memory=memory)
+    hc = horizon_constants(world, traffic, t, x0, H=H, dt=dt, s_pred=s_ref, memory=memory,
+                           station=(s0, float(e_arr[0])))
     # the reference ends with a stop where the plan must stop: the goal (when the route stops
     # there) and a stop line / red light a rule guards that full braking can still stop before
     d_brake, v_brake = _braking(float(x0[3]), H, dt, params)

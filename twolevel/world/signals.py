@@ -231,17 +231,23 @@ class HorizonConstants:
 def horizon_constants(
     world: World, traffic: TrafficState, t0: float, ego: Sequence[float], *, H: int | None = None,
     dt: float | None = None, s_pred: np.ndarray | None = None, memory: StopMemory | None = None,
+    station: tuple[float, float] | None = None,
 ) -> HorizonConstants:
     """The solve-time constants over the horizon from the ego state ``ego`` = (x, y, psi, v)
     [m, m, rad, m/s] at time ``t0`` [s]. ``s_pred`` (H+1,) [m]: the predicted route positions
     (e.g. the shifted previous plan's); default: the route's reference advance from the ego's
-    position. ``memory``: which stop lines are served (default: none)."""
+    position. ``memory``: which stop lines are served (default: none). ``station`` = (s, e) [m]:
+    the ego's route position and lateral offset when the caller has already projected it
+    (default: projected here onto the whole route)."""
     H = world.settings.H if H is None else H
     dt = world.settings.dt if dt is None else dt
     x, y, psi, v = (float(c) for c in ego[:4])
     route = world.route
     r_near = world.settings.r_near
-    s0, e0 = (float(a[0]) for a in route.local_coordinates(np.array([[x, y]])))
+    if station is None:
+        s_at, e_at = route.local_coordinates(np.array([[x, y]]))
+        station = (float(s_at[0]), float(e_at[0]))
+    s0, e0 = float(station[0]), float(station[1])
     t = t0 + dt * np.arange(H + 1)
     if s_pred is None:
         s_pred, _ = route.reference(s0, v, H, dt)
