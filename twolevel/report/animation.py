@@ -24,6 +24,8 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from twolevel.models import obb
+
 FRAMES_FILE = "frames.jsonl"
 EGO, PLAN, OTHER, OTHER_EDGE, LANE, PATH = "#3366cc", "#ff6600", "#999999", "#333333", "#cccccc", "#99ccff"
 LIGHT = {"red": "#cc0000", "yellow": "#ffcc00", "green": "#00cc00", "none": "#999999"}
@@ -44,11 +46,7 @@ class Animation:
 def box_corners(boxes: np.ndarray) -> np.ndarray:
     """Corners [m] of oriented boxes ``(n, 5)`` rows [x, y, psi, length, width] → ``(n, 4, 2)``."""
     b = np.asarray(boxes, dtype=float).reshape(-1, 5)
-    x, y, psi, ln, wd = (b[:, k : k + 1] for k in range(5))
-    sx = np.array([1.0, 1.0, -1.0, -1.0]) * ln / 2
-    sy = np.array([1.0, -1.0, -1.0, 1.0]) * wd / 2
-    c, s = np.cos(psi), np.sin(psi)
-    return np.stack((x + c * sx - s * sy, y + s * sx + c * sy), axis=-1)
+    return obb.box_corners(b[:, 0], b[:, 1], b[:, 2], b[:, 3], b[:, 4])
 
 
 def read_frames(path: str | Path, max_frames: int) -> tuple[list[dict[str, Any]], int, list[str]]:
