@@ -57,7 +57,6 @@ class ModelBuilder:
         self._q: dict[int, float] = {}
         self._q_arrays: list[tuple[np.ndarray, np.ndarray]] = []
         self._res: list[tuple[sp.csr_matrix, np.ndarray, np.ndarray]] = []
-        self._P: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self.c0 = 0.0
         self.disjunctions: list[Disjunction] = []
         # fast access to current bounds (for big-M by interval arithmetic while encoding)
@@ -92,9 +91,6 @@ class ModelBuilder:
         self._lb_buf[blk.start : blk.stop] = lo
         self._ub_buf[blk.start : blk.stop] = hi
         return blk
-
-    def add_binaries(self, name: str, n: int) -> VarBlock:
-        return self.add_vars(name, n, 0.0, 1.0, integer=True)
 
     @property
     def lb(self) -> np.ndarray:
@@ -140,12 +136,6 @@ class ModelBuilder:
         self.n_rows += n_rows
         return out
 
-    def add_matrix(self, name: str, M: sp.spmatrix, lo: np.ndarray | float,
-                   hi: np.ndarray | float, col_offset: int = 0) -> np.ndarray:
-        """Add the rows of a sparse matrix (columns shifted by ``col_offset``)."""
-        C = sp.coo_matrix(M)
-        return self.add_rows(name, C.shape[0], C.row, C.col + col_offset, C.data, lo, hi)
-
     def add_disjunction(self, d: Disjunction) -> None:
         self.disjunctions.append(d)
 
@@ -159,11 +149,6 @@ class ModelBuilder:
         F = sp.csr_matrix(F)
         g = np.asarray(g, dtype=float)
         self._res.append((F, g, np.broadcast_to(np.asarray(w, float), g.shape).copy()))
-
-    def add_quadratic(self, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray) -> None:
-        """Add entries of the symmetric Hessian P (cost ½ xᵀPx); give each off-diagonal pair
-        once (either triangle)."""
-        self._P.append((np.asarray(rows), np.asarray(cols), np.asarray(vals, float)))
 
     # ------------------------------------------------------------------ assembly
     def build(self, cache: PatternCache | None = None) -> MilpModel:
@@ -192,9 +177,6 @@ class ModelBuilder:
             pr.append(H.row), pc.append(H.col), pv.append(H.data)
             q += -2.0 * (F.T @ (w * g))
             c0 += float(w @ (g * g))
-        for r, c, v in self._P:
-            off = r != c
-            pr.extend([r, c[off]]), pc.extend([c, r[off]]), pv.extend([v, v[off]])
         if pr:
             r, c, v = np.concatenate(pr), np.concatenate(pc), np.concatenate(pv)
             up = r <= c

@@ -17,9 +17,7 @@ import numpy as np
 
 from twolevel.milp.model import MilpModel
 
-__all__ = ["Status", "Solution", "CAPABILITIES", "solve_highs", "write_model"]
-
-CAPABILITIES = frozenset({"milp", "lp"})
+__all__ = ["Status", "Solution", "solve_highs", "write_model"]
 
 
 class Status(str, enum.Enum):

@@ -191,10 +191,6 @@ class MilpModel:
     def n_binaries(self) -> int:
         return int(np.count_nonzero(self.integrality & (self.lb >= 0) & (self.ub <= 1)))
 
-    @property
-    def binary_columns(self) -> np.ndarray:
-        return np.flatnonzero(self.integrality)
-
     def cols(self, name: str) -> np.ndarray:
         """Column indices of the variable block ``name``."""
         s = self.col_blocks[name]

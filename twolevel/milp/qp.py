@@ -21,9 +21,8 @@ import scipy.sparse as sp
 from twolevel.milp.highs import Solution, Status
 from twolevel.milp.model import MilpModel, _build_pattern
 
-__all__ = ["FixedModeQP", "CAPABILITIES", "solve_fixed"]
+__all__ = ["FixedModeQP"]
 
-CAPABILITIES = frozenset({"qp", "lp"})
 _UNSET = object()
 
 
@@ -224,15 +223,3 @@ class FixedModeQP:
         self.setup_ms = (t1 - t0) * 1e3
         return Solution(status, x, obj, (t2 - t1) * 1e3, self.setup_ms,
                         info={"z": np.asarray(sol.z), "iterations": int(sol.iterations)})
-
-
-def off_rows_of(qp: FixedModeQP, off_rows: np.ndarray) -> np.ndarray:
-    """Per Clarabel triplet of the model part: is its model row switched off?"""
-    rows = qp.model.A.indices[qp._src]
-    return off_rows[rows]
-
-
-def solve_fixed(model: MilpModel, x: np.ndarray, **kw: object) -> Solution:
-    """One-shot: the QP of ``model`` with the integer columns taken from the point ``x``."""
-    qp = FixedModeQP(model, **kw)  # type: ignore[arg-type]
-    return qp.solve(np.asarray(x)[qp.ints])

@@ -13,7 +13,7 @@ from typing import Union
 
 import numpy as np
 
-__all__ = ["Lin", "Op", "Block", "Tree", "mk", "add", "scale", "negate", "bounds", "is_const"]
+__all__ = ["Lin", "Op", "Block", "Tree", "mk", "add", "scale", "negate", "bounds"]
 
 INF = math.inf
 
@@ -66,10 +66,6 @@ class Block:
 
 
 Tree = Union[float, Lin, Op, Block]
-
-
-def is_const(t: Tree) -> bool:
-    return isinstance(t, float)
 
 
 def lin(idx: tuple[int, ...], val: tuple[float, ...], c: float) -> Tree:
