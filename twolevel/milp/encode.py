@@ -40,11 +40,10 @@ from typing import Iterable, Literal, Mapping
 
 import numpy as np
 
-from twolevel.diagnostics import Span
 from twolevel.milp.builder import ModelBuilder
 from twolevel.milp.encoder import Encoder
 from twolevel.milp.encoding import (MIL501, MIL502, MIL503, MIL504, AffineSignal, Builtin, Emission,  # noqa: F401
-                                    EncodeError, Encoding, Requirement, Signal, _has_block, _span)
+                                    EncodeError, Encoding, Requirement, Signal, _NOWHERE, _span)
 from twolevel.milp.robtree import INF, Lin, Op, Tree, bounds, mk
 from twolevel.stl import ast
 
@@ -64,8 +63,6 @@ __all__ = [
     "MIL503",
     "MIL504",
 ]
-
-_NOWHERE = Span("<rules>")
 
 
 def encode(
