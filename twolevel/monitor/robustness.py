@@ -78,7 +78,11 @@ def _trace_length(signals: Mapping[str, np.ndarray], rules: Mapping[str, np.ndar
 
 
 class _Evaluator:
-    """One evaluation: signals, constants, rule results and a memo of evaluated nodes."""
+    """One evaluation: signals, constants, rule results and a memo of evaluated nodes.
+
+    Shape-generic: every value is an array of :attr:`shape` with time along the last axis, so
+    the batched monitor (:mod:`twolevel.control.batch_monitor`, shape (K, T)) reuses the whole
+    evaluation and only sets up its signals differently."""
 
     def __init__(
         self,
@@ -91,11 +95,20 @@ class _Evaluator:
         if not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
             raise MonitorError(f"the sampling period dt must be a positive number of seconds, got {dt!r}", "dt")
         self.n = _trace_length(signals, rules)
+        self.shape: tuple[int, ...] = (self.n,)
         self.dt = float(dt)
         self.signals = {k: np.asarray(v, dtype=np.float64) for k, v in signals.items()}
         self.consts = consts
         self.rules = {k: np.asarray(v, dtype=np.float64) for k, v in rules.items()}
         self.builtins = DEFAULT_BUILTINS if builtins is None else builtins
+
+    def full(self, value: float) -> np.ndarray:
+        """``value`` at every sample."""
+        return np.full(self.shape, value)
+
+    def _pad(self, x: np.ndarray, value: float) -> np.ndarray:
+        """One sample of ``value`` to put before or after ``x`` along time."""
+        return np.full(x.shape[:-1] + (1,), value)
 
     # -- names --------------------------------------------------------------------------------
     def lookup(self, name: str) -> np.ndarray:
@@ -104,7 +117,7 @@ class _Evaluator:
         if name in self.signals:
             return self.signals[name]
         if name in self.consts:
-            return np.full(self.n, float(self.consts[name]))
+            return self.full(float(self.consts[name]))
         raise MonitorError(f"no signal, constant or earlier rule named '{name}'", name)
 
     def steps(self, interval: ast.Interval | None) -> tuple[int, int | None]:
@@ -117,13 +130,12 @@ class _Evaluator:
         return ast.fold(root, self.apply)
 
     def apply(self, node: ast.Node, args: list[np.ndarray]) -> np.ndarray:  # noqa: C901 - a dispatch table
-        n = self.n
         if isinstance(node, ast.Num):
-            return np.full(n, float(node.value))
+            return self.full(float(node.value))
         if isinstance(node, ast.Var):
             return self.lookup(node.name)
         if isinstance(node, ast.BoolConst):
-            return np.full(n, _INF if node.value else -_INF)
+            return self.full(_INF if node.value else -_INF)
         if isinstance(node, ast.Neg):
             return -args[0]
         if isinstance(node, ast.Abs):
@@ -169,24 +181,24 @@ class _Evaluator:
         if isinstance(node, ast.Edge):
             x = args[0]
             if node.op == "rise":
-                prev = np.concatenate(([-_INF], x[:-1]))
+                prev = np.concatenate((self._pad(x, -_INF), x[..., :-1]), axis=-1)
                 return np.minimum(x, -prev)
-            prev = np.concatenate(([_INF], x[:-1]))
+            prev = np.concatenate((self._pad(x, _INF), x[..., :-1]), axis=-1)
             return np.minimum(prev, -x)
         if isinstance(node, ast.Call):
             fn = self.builtins.get(node.name)
             if fn is None:
                 raise MonitorError(f"unknown built-in predicate '{node.name}'", node.name)
             out = np.asarray(fn(self.signals, *args), dtype=np.float64)
-            return np.broadcast_to(out, (n,)).copy()
+            return np.broadcast_to(out, self.shape).copy()
         raise MonitorError(f"cannot evaluate a {type(node).__name__} node", type(node).__name__)
 
     def temporal(self, node: ast.Temporal, x: np.ndarray) -> np.ndarray:
         op = node.op
         if op == "next":
-            return np.concatenate((x[1:], [_INF]))[: self.n]
+            return np.concatenate((x[..., 1:], self._pad(x, _INF)), axis=-1)[..., : self.n]
         if op == "prev":
-            return np.concatenate(([_INF], x[:-1]))[: self.n]
+            return np.concatenate((self._pad(x, _INF), x[..., :-1]), axis=-1)[..., : self.n]
         a, b = self.steps(node.interval)
         if op == "always":
             return windows.future_window(x, a, b, "min")
