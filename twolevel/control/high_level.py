@@ -41,7 +41,7 @@ import math
 import time
 from collections import OrderedDict
 from dataclasses import dataclass, replace
-from typing import Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -200,23 +200,11 @@ class HighLevelController:
     def from_world(cls, world: World, settings: MPCSettings | None = None, *, solver: str | None = None,
                    params: BicycleParams | None = None) -> tuple["HighLevelController | None", list[Diagnostic]]:
         """The controller of a scenario's world with its own rule files and settings."""
-        from twolevel.world.world import load_rulesets
-
-        sets, diags = load_rulesets(world)
-        if any(d.is_error for d in diags):
-            return None, diags
         st = settings or MPCSettings(H=world.settings.H, dt=world.settings.dt, solver=solver or world.settings.solver,
                                      time_limit=world.settings.time_limit, stop_decel=world.settings.yellow_decel)
         if solver is not None:
             st = MPCSettings(**{**st.__dict__, "solver": solver})
-        if params is None:
-            params = BicycleParams().with_overrides({k: v for k, v in world.ego.vehicle.items()
-                                                     if k in BicycleParams.__dataclass_fields__})
-        try:
-            ctrl = cls(world, sets, st, params=params)
-        except ValueError as e:
-            return None, diags + [MIL512(str(e), Span(world.name))]
-        return ctrl, diags + ctrl.diagnostics
+        return controller_of_world(cls, world, st, params)
 
     def reset(self) -> None:
         """Forget the previous plan (the next step linearises about the reference)."""
@@ -235,10 +223,7 @@ class HighLevelController:
         H, dt = self.settings.H, self.settings.dt
         traffic, memory = _unpack(world_state)
         hist = {k: np.asarray(v, float) for k, v in (history or {}).items()}
-        if memory is None and len(self.world.route_stops) and "s" in hist and "v" in hist:
-            memory = StopMemory.fresh(self.world)
-            for s, v in zip(hist["s"], hist["v"]):
-                memory = update_stop_memory(memory, self.world, float(s), float(v), dt)
+        memory = stop_memory_of(self.world, memory, hist, dt)
         prev = None
         if self._prev is not None and abs(t - self._prev[0] - dt) < 1e-6 and self._prev[2].shape[0] == H:
             prev = (self._prev[1], self._prev[2])
@@ -407,6 +392,37 @@ class HighLevelController:
         elif res.status == "fallback":
             self._prev = (t, res.states, res.controls, res.mode)
         return res
+
+
+def controller_of_world(cls: Any, world: World, settings: MPCSettings, params: BicycleParams | None,
+                        **kw: object) -> tuple[Any, list[Diagnostic]]:
+    """``cls(world, rulesets, settings, params=…, **kw)`` with the world's own rule files and, by
+    default, the bicycle parameters of the world's ego; (None, diagnostics) when a rule file has
+    an error or the constructor rejects its arguments (MIL512). Shared by the MPC and the NMPC."""
+    from twolevel.world.world import load_rulesets
+
+    sets, diags = load_rulesets(world)
+    if any(d.is_error for d in diags):
+        return None, diags
+    if params is None:
+        params = BicycleParams().with_overrides({k: v for k, v in world.ego.vehicle.items()
+                                                 if k in BicycleParams.__dataclass_fields__})
+    try:
+        ctrl = cls(world, sets, settings, params=params, **kw)
+    except ValueError as e:
+        return None, diags + [MIL512(str(e), Span(world.name))]
+    return ctrl, diags + ctrl.diagnostics
+
+
+def stop_memory_of(world: World, memory: StopMemory | None, hist: Mapping[str, np.ndarray], dt: float
+                   ) -> StopMemory | None:
+    """``memory``, or when none was given the stop memory replayed from the history's ``s`` [m]
+    and ``v`` [m/s] samples (None when the route has no stop line or the history lacks them)."""
+    if memory is None and len(world.route_stops) and "s" in hist and "v" in hist:
+        memory = StopMemory.fresh(world)
+        for s, v in zip(hist["s"], hist["v"]):
+            memory = update_stop_memory(memory, world, float(s), float(v), dt)
+    return memory
 
 
 def _unpack(world_state: TrafficState | Snapshot | None) -> tuple[TrafficState, StopMemory | None]:

@@ -52,7 +52,8 @@ import numpy as np
 
 from twolevel.control.codes import MIL515
 from twolevel.control.guards import stop_lines
-from twolevel.control.high_level import MPCSettings, PlanResult, Snapshot, _unpack
+from twolevel.control.high_level import (MPCSettings, PlanResult, Snapshot, _unpack, controller_of_world,
+                                        stop_memory_of)
 from twolevel.control.horizon import StepData, prepare_step
 from twolevel.control.nmpc_nlp import MODELS, NlpSolution, NmpcProblem
 from twolevel.diagnostics import Code, Diagnostic, Severity, Span
@@ -60,7 +61,6 @@ from twolevel.models import fourwheel as fw
 from twolevel.models.params import BicycleParams, VehicleParams
 from twolevel.stl import analysis, ast
 from twolevel.stl.typecheck import RuleSet
-from twolevel.world.signals import StopMemory, update_stop_memory
 from twolevel.world.traffic import TrafficState
 from twolevel.world.world import World
 
@@ -156,21 +156,8 @@ class NmpcController:
                    params: BicycleParams | None = None, options: NmpcOptions | None = None
                    ) -> tuple["NmpcController | None", list[Diagnostic]]:
         """The NMPC of a scenario's world with its own rule files and settings."""
-        from twolevel.control.codes import MIL512
-        from twolevel.world.world import load_rulesets
-
-        sets, diags = load_rulesets(world)
-        if any(d.is_error for d in diags):
-            return None, diags
         st = settings or MPCSettings(H=world.settings.H, dt=world.settings.dt, time_limit=world.settings.time_limit)
-        if params is None:
-            params = BicycleParams().with_overrides({k: v for k, v in world.ego.vehicle.items()
-                                                     if k in BicycleParams.__dataclass_fields__})
-        try:
-            ctrl = cls(world, sets, st, model=model, params=params, options=options)
-        except ValueError as e:
-            return None, diags + [MIL512(str(e), Span(world.name))]
-        return ctrl, diags + ctrl.diagnostics
+        return controller_of_world(cls, world, st, params, model=model, options=options)
 
     def reset(self) -> None:
         """Forget the previous solution (the next step starts cold from the reference)."""
@@ -183,10 +170,7 @@ class NmpcController:
         st = self.settings
         traffic, memory = _unpack(world_state)
         hist = {k: np.asarray(v, float) for k, v in (history or {}).items()}
-        if memory is None and len(self.world.route_stops) and "s" in hist and "v" in hist:
-            memory = StopMemory.fresh(self.world)
-            for s, v in zip(hist["s"], hist["v"]):
-                memory = update_stop_memory(memory, self.world, float(s), float(v), st.dt)
+        memory = stop_memory_of(self.world, memory, hist, st.dt)
         u_prev = None
         if len(hist.get("delta", ())) and len(hist.get("a", ())):
             u_prev = np.array([hist["delta"][-1], hist["a"][-1]])
