@@ -7,6 +7,7 @@ functions that need them, so ``twolevel check`` never loads numpy or a solver.
 
 from __future__ import annotations
 
+import functools
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,18 +38,18 @@ class CheckResult:
     @property
     def unreadable(self) -> bool:
         """True when some input could not be read at all (exit code 2)."""
-        codes = UNREADABLE_CODES | _unreadable_codes("twolevel.stl.codes") | _unreadable_codes("twolevel.world.codes")
+        codes = _unreadable_codes()
         return any(d.code in codes for d in self.diagnostics)
 
 
-def _unreadable_codes(module: str) -> frozenset[str]:
-    """The codes a stage declares for files it could not read at all (its ``UNREADABLE``)."""
-    import importlib
+@functools.cache
+def _unreadable_codes() -> frozenset[str]:
+    """The command line's :data:`UNREADABLE_CODES` and the codes each stage declares for files
+    it could not read at all (its ``UNREADABLE``); gathered once."""
+    from twolevel.stl import codes as stl_codes
+    from twolevel.world import codes as world_codes
 
-    try:
-        return frozenset(getattr(importlib.import_module(module), "UNREADABLE", frozenset()))
-    except ImportError:
-        return frozenset()
+    return UNREADABLE_CODES | stl_codes.UNREADABLE | world_codes.UNREADABLE
 
 
 def collect_paths(paths: Sequence[str]) -> tuple[list[str], list[Diagnostic]]:
