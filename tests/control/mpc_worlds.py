@@ -1,4 +1,4 @@
-"""Small scenarios for the MPC tests, written to a temporary directory, and a closed loop on the
+"""Small scenarios for the MPC and low-level tests, written to a temporary directory, and a closed loop on the
 kinematic bicycle itself (the MPC's own model) with constant-velocity traffic."""
 
 from __future__ import annotations
@@ -43,6 +43,27 @@ def rules(tmp: Path, text: str, name: str = "r"):
     rs, diags = load_ruleset(str(p), dt=0.1, provided_signals=PROVIDED_SIGNALS)
     assert rs is not None, [d.message for d in diags]
     return rs
+
+def highway_world(tmp_path: Path, rules: str, participants: str = "", speed: float = 15.0):  # noqa: ANN201
+    """The low level's test world: the highway, the ego in the middle lane at s = 20 m and
+    ``speed`` [m/s], ``participants`` (YAML list items), and the rule file ``rules`` (text).
+    Returns (world, ruleset)."""
+    (tmp_path / "r.stl").write_text(rules)
+    (tmp_path / "s.yaml").write_text(f"""
+kind: scenario
+name: unit
+map: {MAPS / 'highway.yaml'}
+ego: {{start: {{lane: middle, s: 20}}, speed: {speed}}}
+route: {{start: {{lane: middle, s: 20}}, goal: {{lane: middle, s: 600}}, stop_at_goal: false}}
+participants: [{participants}]
+rules: [r.stl]
+run: {{duration: 5, seed: 3}}
+""")
+    scn, diags = load_scenario(str(tmp_path / "s.yaml"))
+    assert scn is not None, [d.message for d in diags]
+    rs, d = load_ruleset(str(tmp_path / "r.stl"), dt=0.1, provided_signals=PROVIDED_SIGNALS)
+    assert rs is not None, [x.message for x in d]
+    return build_world(scn), rs
 
 
 def controller(world: World, rulesets, **kw) -> HighLevelController:

@@ -9,32 +9,8 @@ import numpy as np
 from twolevel.control.low_level import LowLevelController, LowLevelSettings
 from twolevel.control.sensing import Memory
 from twolevel.models import fourwheel as fw
-from twolevel.stl.lint import load_ruleset
-from twolevel.world.loader import load_scenario
-from twolevel.world.provided import PROVIDED_SIGNALS
-from twolevel.world.world import build_world
 
-ROOT = Path(__file__).resolve().parents[2]
-
-
-def _world(tmp_path: Path, rules: str, participants: str = "", speed: float = 15.0):
-    (tmp_path / "r.stl").write_text(rules)
-    (tmp_path / "s.yaml").write_text(f"""
-kind: scenario
-name: unit
-map: {ROOT / 'maps' / 'highway.yaml'}
-ego: {{start: {{lane: middle, s: 20}}, speed: {speed}}}
-route: {{start: {{lane: middle, s: 20}}, goal: {{lane: middle, s: 600}}, stop_at_goal: false}}
-participants: [{participants}]
-rules: [r.stl]
-run: {{duration: 5, seed: 3}}
-""")
-    scn, diags = load_scenario(str(tmp_path / "s.yaml"))
-    assert scn is not None, [d.message for d in diags]
-    w = build_world(scn)
-    rs, d = load_ruleset(str(tmp_path / "r.stl"), dt=0.1, provided_signals=PROVIDED_SIGNALS)
-    assert rs is not None, [x.message for x in d]
-    return w, rs
+from mpc_worlds import highway_world
 
 
 def _decide(w, rs, v: float, u: np.ndarray, *, samples: int = 200, step: int = 0, least: bool = True):
@@ -48,7 +24,7 @@ SPEED = "input float v\ninput float v_max\nspeed = always[0:1] (v <= v_max + 0.5
 
 
 def test_holding_plan_is_applied(tmp_path: Path) -> None:
-    w, rs = _world(tmp_path, SPEED)
+    w, rs = highway_world(tmp_path, SPEED)
     d = _decide(w, rs, 29.0, np.tile([0.0, 0.0], (10, 1)))
     assert d.decision == "mpc" and d.candidates == 0
     assert d.robustness["speed"] > 0 and d.control[0] == 0.0
@@ -58,7 +34,7 @@ def test_holding_plan_is_applied(tmp_path: Path) -> None:
 def test_violating_plan_is_replaced_by_a_sampled_control_that_satisfies(tmp_path: Path) -> None:
     # at 30.3 m/s (limit 30 + 0.5) accelerating at 1 m/s² breaks the limit within the second;
     # candidates with γ up to 0.3 lower brake a little and keep it
-    w, rs = _world(tmp_path, SPEED)
+    w, rs = highway_world(tmp_path, SPEED)
     u = np.tile([0.0, 1.0], (10, 1))
     d = _decide(w, rs, 30.3, u)
     assert d.mpc_robustness["speed"] < 0 and d.violated == ("speed",)
@@ -75,7 +51,7 @@ def test_violating_plan_is_replaced_by_a_sampled_control_that_satisfies(tmp_path
 def test_impossible_situation_brakes(tmp_path: Path) -> None:
     # a stopped car 8 m ahead (centres) at 15 m/s: no control can keep the boxes 1 m apart
     rules = "input float min_gap\nsafe = always[0:1] collision_free(1.0);\n"
-    w, rs = _world(tmp_path, rules, "{id: stalled, behaviour: stationary, start: {lane: middle, s: 28}}")
+    w, rs = highway_world(tmp_path, rules, "{id: stalled, behaviour: stationary, start: {lane: middle, s: 28}}")
     d = _decide(w, rs, 15.0, np.tile([0.0, -2.0], (10, 1)), samples=40, least=False)
     assert d.decision == "brake" and d.candidates == 40
     assert d.control[1] == -1.0 and d.accel < -8.0
@@ -86,7 +62,7 @@ def test_a_standing_car_that_braking_cannot_help_takes_the_least_violating_choic
     # stopped half across the lane marking while the next lane's traffic closes in from behind:
     # braking keeps it there; moving back towards its lane violates less
     rules = "input float min_gap\nsafe = always[0:1] collision_free(1.0);\n"
-    w, rs = _world(tmp_path, rules, "{id: passing, behaviour: constant_velocity, start: {lane: left, s: 14}, speed: 14}")
+    w, rs = highway_world(tmp_path, rules, "{id: passing, behaviour: constant_velocity, start: {lane: left, s: 14}, speed: 14}")
     ll = LowLevelController.from_rulesets(w, [rs], settings=LowLevelSettings(samples=40, seed=7))
     x0 = fw.initial_state(w.ego.x, w.ego.y + 1.5, 0.15, 0.0)
     u = np.tile([-0.4, 2.0], (10, 1))
@@ -96,13 +72,13 @@ def test_a_standing_car_that_braking_cannot_help_takes_the_least_violating_choic
     assert b.decision == "brake" and b.robustness["safe"] < 0
     assert d.decision == "least_violation" and d.robustness["safe"] > b.robustness["safe"]
     # at speed the paper's full brake stands even with least_violation on
-    w2, rs2 = _world(tmp_path, rules, "{id: stalled, behaviour: stationary, start: {lane: middle, s: 28}}")
+    w2, rs2 = highway_world(tmp_path, rules, "{id: stalled, behaviour: stationary, start: {lane: middle, s: 28}}")
     assert _decide(w2, rs2, 15.0, np.tile([0.0, -2.0], (10, 1)), samples=40).decision == "brake"
 
 
 def test_current_sample_is_not_judged(tmp_path: Path) -> None:
     # now v = 30.3 breaks 'v <= 30.2', but under braking every controlled sample keeps it
-    w, rs = _world(tmp_path, "input float v\nnow_or_later = v <= 30.2;\n")
+    w, rs = highway_world(tmp_path, "input float v\nnow_or_later = v <= 30.2;\n")
     d = _decide(w, rs, 30.3, np.tile([0.0, -3.0], (10, 1)))
     assert d.decision == "mpc" and d.robustness["now_or_later"] >= 0
 

@@ -12,32 +12,9 @@ import pytest
 from twolevel.control.low_level import LowLevelController, LowLevelSettings, prefix_bounded
 from twolevel.control.sensing import Memory
 from twolevel.models import fourwheel as fw
-from twolevel.stl.lint import load_ruleset
 from twolevel.stl.parser import parse
-from twolevel.world.loader import load_scenario
-from twolevel.world.provided import PROVIDED_SIGNALS
-from twolevel.world.world import build_world
 
-ROOT = Path(__file__).resolve().parents[2]
-
-
-def _world(tmp_path: Path, rules: str, participants: str = ""):  # noqa: ANN202
-    (tmp_path / "r.stl").write_text(rules)
-    (tmp_path / "s.yaml").write_text(f"""
-kind: scenario
-name: unit
-map: {ROOT / 'maps' / 'highway.yaml'}
-ego: {{start: {{lane: middle, s: 20}}, speed: 15}}
-route: {{start: {{lane: middle, s: 20}}, goal: {{lane: middle, s: 600}}, stop_at_goal: false}}
-participants: [{participants}]
-rules: [r.stl]
-run: {{duration: 5, seed: 3}}
-""")
-    scn, diags = load_scenario(str(tmp_path / "s.yaml"))
-    assert scn is not None, [d.message for d in diags]
-    rs, d = load_ruleset(str(tmp_path / "r.stl"), dt=0.1, provided_signals=PROVIDED_SIGNALS)
-    assert rs is not None, [x.message for x in d]
-    return build_world(scn), rs
+from mpc_worlds import highway_world
 
 
 def parse_formula(text: str):  # noqa: ANN201
@@ -84,7 +61,7 @@ def kept(monkeypatch: pytest.MonkeyPatch) -> list[tuple[int, int]]:
 
 def test_everything_pruned_brakes_as_without_screening(tmp_path: Path, kept: list) -> None:
     # a stopped car 6 m ahead at 15 m/s: every candidate collides within the first steps
-    w, rs = _world(tmp_path, GAP, "{id: stalled, behaviour: stationary, start: {lane: middle, s: 26}}")
+    w, rs = highway_world(tmp_path, GAP, "{id: stalled, behaviour: stationary, start: {lane: middle, s: 26}}")
     d = _pair(w, rs, 15.0, np.tile([0.0, -2.0], (10, 1)))
     assert d.decision == "brake" and d.candidates == 200
     assert kept == [(0, 32), (0, 64), (0, 104)] * 3
@@ -93,7 +70,7 @@ def test_everything_pruned_brakes_as_without_screening(tmp_path: Path, kept: lis
 def test_late_violation_stops_screening_and_brakes_the_same(tmp_path: Path, kept: list) -> None:
     # 8 m ahead at 6 m/s: the collision shows after the screened prefix, nothing is pruned, so
     # the later rounds are not screened
-    w, rs = _world(tmp_path, BOTH, "{id: stalled, behaviour: stationary, start: {lane: middle, s: 28}}")
+    w, rs = highway_world(tmp_path, BOTH, "{id: stalled, behaviour: stationary, start: {lane: middle, s: 28}}")
     d = _pair(w, rs, 6.0, np.tile([0.0, 0.0], (10, 1)))
     assert d.decision == "brake" and kept[0] == (32, 32)
 
@@ -101,7 +78,7 @@ def test_late_violation_stops_screening_and_brakes_the_same(tmp_path: Path, kept
 @pytest.mark.parametrize("v, a", [(30.3, 1.0), (30.2, 0.5), (30.0, 1.5)])
 def test_partly_pruned_round_samples_the_same(tmp_path: Path, kept: list, v: float, a: float) -> None:
     # near the limit, accelerating: the candidates with more throttle break it within the prefix
-    w, rs = _world(tmp_path, BOTH)
+    w, rs = highway_world(tmp_path, BOTH)
     d = _pair(w, rs, v, np.tile([0.0, a], (10, 1)))
     assert d.decision == "sampled"
     assert kept and 0 < kept[0][0] < kept[0][1]
@@ -129,7 +106,7 @@ def test_standing_least_violating_choice_is_the_same(tmp_path: Path, kept: list)
     # stopped half across the lane marking while the next lane's traffic closes in from behind:
     # the least-violating choice compares every candidate's worst robustness; dropped candidates
     # whose prefix bound could beat the best are judged in full
-    w, rs = _world(tmp_path, GAP, "{id: passing, behaviour: constant_velocity, start: {lane: left, s: 14}, speed: 14}")
+    w, rs = highway_world(tmp_path, GAP, "{id: passing, behaviour: constant_velocity, start: {lane: left, s: 14}, speed: 14}")
     for samples in (40, 200):
         kept.clear()
         d = _pair(w, rs, 0.0, np.tile([-0.4, 2.0], (10, 1)), samples=samples, y=1.5, psi=0.15)
