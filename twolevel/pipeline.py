@@ -128,16 +128,10 @@ def dedupe(diags: Iterable[Diagnostic]) -> list[Diagnostic]:
 def _read_text_quietly(path: str, limit: int = 1 << 20) -> str:
     """The text of a regular file up to ``limit`` bytes, for showing source lines; "" for
     anything else (a FIFO or a device would block or never end)."""
-    import stat
+    from twolevel.files import read_regular
 
-    try:
-        st = os.stat(path)
-        if not stat.S_ISREG(st.st_mode) or st.st_size > limit:
-            return ""
-        with open(path, "rb") as fh:
-            return fh.read(limit).decode("utf-8", errors="replace")
-    except OSError:
-        return ""
+    data, _ = read_regular(path, limit)
+    return "" if data is None else data.decode("utf-8", errors="replace")
 
 
 def exit_code(diags: Iterable[Diagnostic], *, strict: bool = False, exit_zero: bool = False) -> int:
