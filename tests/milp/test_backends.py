@@ -60,6 +60,18 @@ def _reference_qp(model, x_int):
     return h.getInfo().objective_function_value
 
 
+def _one_hot_modes(model, qp: FixedModeQP, disjunctions=None) -> list[np.ndarray]:  # noqa: ANN001
+    """The integer vectors (over ``qp.ints``) that switch on one disjunct each, over every
+    disjunct of ``disjunctions`` (default: all of the model's)."""
+    modes = []
+    for d in model.disjunctions if disjunctions is None else disjunctions:
+        for i in range(d.size):
+            xi = np.zeros(qp.ints.size)
+            xi[np.searchsorted(qp.ints, d.binaries[i])] = 1
+            modes.append(xi)
+    return modes
+
+
 def test_exact_path_l1_mode_then_clarabel_polish() -> None:
     model, (pb, vb, ab), enc = _mpc()
     assert enc.binaries > 0 and model.P is not None
@@ -76,15 +88,12 @@ def test_exact_path_l1_mode_then_clarabel_polish() -> None:
     assert pol.objective == pytest.approx(ref, rel=1e-5, abs=1e-6)
     # the best of all modes is no better than... enumerate the modes of the one disjunction
     best = np.inf
-    for d in model.disjunctions:
-        for i in range(d.size):
-            xi = np.zeros(qp.ints.size)
-            xi[np.searchsorted(qp.ints, d.binaries[i])] = 1
-            r = qp.solve(xi)
-            if r.ok:
-                best = min(best, r.objective)
-                ref = _reference_qp(model, xi)
-                assert r.objective == pytest.approx(ref, rel=1e-5, abs=1e-6)
+    for xi in _one_hot_modes(model, qp):
+        r = qp.solve(xi)
+        if r.ok:
+            best = min(best, r.objective)
+            ref = _reference_qp(model, xi)
+            assert r.objective == pytest.approx(ref, rel=1e-5, abs=1e-6)
     assert pol.objective >= best - 1e-6
 
 
@@ -95,12 +104,7 @@ def test_clarabel_update_in_place_equals_a_fresh_solver() -> None:
     assert cache.hits == 1 and cache.misses == 1
     assert np.array_equal(m1.A.indptr, m2.A.indptr) and np.array_equal(m1.A.indices, m2.A.indices)
     qp = FixedModeQP(m1)
-    d = m1.disjunctions[0]
-    modes = []
-    for i in range(d.size):
-        xi = np.zeros(qp.ints.size)
-        xi[np.searchsorted(qp.ints, d.binaries[i])] = 1
-        modes.append(xi)
+    modes = _one_hot_modes(m1, qp, m1.disjunctions[:1])
     first = [qp.solve(xi) for xi in modes]  # one solver object, updated per mode
     # switch the same object to the second model's values (same pattern)
     qp.model = m2
@@ -121,13 +125,10 @@ def test_lower_bound_with_every_disjunctive_row_disabled() -> None:
     lb = qp.solve(np.zeros(qp.ints.size), disable=qp.disjunctive_rows())
     assert lb.ok
     # every feasible mode costs at least the bound
-    for d in model.disjunctions:
-        for i in range(d.size):
-            xi = np.zeros(qp.ints.size)
-            xi[np.searchsorted(qp.ints, d.binaries[i])] = 1
-            r = qp.solve(xi)
-            if r.ok:
-                assert r.objective >= lb.objective - 1e-7
+    for xi in _one_hot_modes(model, qp):
+        r = qp.solve(xi)
+        if r.ok:
+            assert r.objective >= lb.objective - 1e-7
 
 
 def test_infeasible_mode_is_reported() -> None:
