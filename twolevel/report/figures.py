@@ -18,7 +18,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from twolevel.atomic import write_bytes_atomic
-from twolevel.report.metrics import COLLISION_LINE_M, DECISIONS, LIGHT_STATES, RULE_PREFIX, STEP_BUDGET_MS, Metrics, find_violations
+from twolevel.report.metrics import COLLISION_LINE_M, DECISIONS, LIGHT_STATES, RULE_PREFIX, STEP_BUDGET_MS, Metrics
 from twolevel.sim.trace import RunData
 
 LIGHT_COLOURS = {"none": "#d0d0d0", "green": "#2ca02c", "yellow": "#f2c200", "red": "#d62728"}
@@ -286,7 +286,7 @@ def _robustness(fig: Any, series: Sequence[Series]) -> bool:
                 continue
             ax.plot(s.t, _finite(rob), color=_colour(i), linewidth=1.1, label=s.label if len(series) > 1 else "robustness")
             step = s.metrics.dt_s if math.isfinite(s.metrics.dt_s) else 0.0
-            for k, v in enumerate(find_violations(rule, rob, s.t)):
+            for k, v in enumerate(w for w in s.metrics.violations if w.rule == rule):
                 ax.axvspan(v.t_start, v.t_end + step, color="#d62728" if len(series) == 1 else _colour(i), alpha=0.2,
                            label=_run_suffix(series, s, "violated (ρ < 0)") if k == 0 else None)
         ax.axhline(0.0, color="k", label="ρ = 0 (satisfied above)", **LIMIT)
