@@ -36,6 +36,7 @@ from twolevel.monitor.codes import SIM601, SIM602, SIM603, SIM604, SIM605, SIM60
 from twolevel.monitor.errors import MonitorError
 from twolevel.monitor.robustness import DEFAULT_BUILTINS, Builtin, TraceEvaluator
 from twolevel.stl import ast
+from twolevel.stl.analysis import fold_term
 
 __all__ = [
     "Trace",
@@ -352,35 +353,14 @@ def read_trace(path: str | os.PathLike[str], *, dt: float | None = None) -> tupl
 # --------------------------------------------------------------------------------- monitoring
 
 
-def _const_value(term: ast.Node, known: Mapping[str, float]) -> float | None:
-    if isinstance(term, ast.Num):
-        return float(term.value)
-    if isinstance(term, ast.Var):
-        return known.get(term.name)
-    if isinstance(term, ast.Neg):
-        v = _const_value(term.operand, known)
-        return None if v is None else -v
-    if isinstance(term, ast.Abs):
-        v = _const_value(term.operand, known)
-        return None if v is None else abs(v)
-    if isinstance(term, ast.Arith):
-        a, b = _const_value(term.left, known), _const_value(term.right, known)
-        if a is None or b is None:
-            return None
-        if term.op == "/":
-            return a / b if b != 0 else None
-        return a + b if term.op == "+" else a - b if term.op == "-" else a * b
-    return None
-
-
 def consts_of(rule_file: ast.RuleFile) -> dict[str, float]:
     """The values of the file's ``const float NAME = value`` declarations (in order)."""
     out: dict[str, float] = {}
     for d in rule_file.declarations:
         if d.kind == "const" and d.value is not None:
-            v = _const_value(d.value, out)
-            if v is not None:
-                out[d.name] = v
+            value = fold_term(d.value, out)  # the type checker's folding: finite numbers only
+            if isinstance(value, ast.Num):
+                out[d.name] = float(value.value)
     return out
 
 
