@@ -126,21 +126,8 @@ class _Compiler:
 
     # -- formulas -------------------------------------------------------------------------------
     def formula(self, root: ast.Node) -> int:
-        memo: dict[int, int] = {}
-        stack: list[tuple[ast.Node, bool]] = [(root, False)]
-        while stack:
-            node, ready = stack.pop()
-            if id(node) in memo:
-                continue
-            kids = [] if isinstance(node, (ast.Compare, ast.Call)) else [
-                c for c in node.children() if not isinstance(c, ast.Interval)
-            ]
-            if not ready:
-                stack.append((node, True))
-                stack.extend((c, False) for c in kids if id(c) not in memo)
-                continue
-            memo[id(node)] = self.build(node, [memo[id(c)] for c in kids])
-        return memo[id(root)]
+        # comparisons and built-in calls are single atoms: their terms are inlined code, not slots
+        return ast.fold(root, self.build, leaves=(ast.Compare, ast.Call))
 
     def steps(self, interval: ast.Interval | None) -> tuple[int, int | None]:
         return (0, None) if interval is None else interval.steps(self.dt)

@@ -284,9 +284,12 @@ class RuleFile(Node):
 _T = TypeVar("_T")
 
 
-def fold(root: Node, apply: Callable[[Node, list[_T]], _T]) -> _T:
+def fold(
+    root: Node, apply: Callable[[Node, list[_T]], _T], *, leaves: tuple[type[Node], ...] = ()
+) -> _T:
     """Evaluate a tree bottom-up: ``apply(node, values of its children)`` for every node, children
-    first, each shared subtree once (by identity); intervals are parameters, not children. Iterative,
+    first, each shared subtree once (by identity); intervals are parameters, not children. Nodes of
+    the ``leaves`` types are applied with no children (their subtrees are not visited). Iterative,
     so deep formulas do not reach the recursion limit. The monitors evaluate formulas with it."""
     memo: dict[int, _T] = {}
     stack: list[tuple[Node, bool]] = [(root, False)]
@@ -294,9 +297,10 @@ def fold(root: Node, apply: Callable[[Node, list[_T]], _T]) -> _T:
         node, ready = stack.pop()
         if id(node) in memo:
             continue
+        kids = () if isinstance(node, leaves) else [c for c in node.children() if not isinstance(c, Interval)]
         if not ready:
             stack.append((node, True))
-            stack.extend((c, False) for c in node.children() if not isinstance(c, Interval) and id(c) not in memo)
+            stack.extend((c, False) for c in kids if id(c) not in memo)
             continue
-        memo[id(node)] = apply(node, [memo[id(c)] for c in node.children() if not isinstance(c, Interval)])
+        memo[id(node)] = apply(node, [memo[id(c)] for c in kids])
     return memo[id(root)]
