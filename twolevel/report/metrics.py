@@ -21,12 +21,13 @@ Conventions:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields, is_dataclass
+from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
 import numpy as np
 
 from twolevel.sim.summary import LEVEL as _LEVEL
+from twolevel.sim.summary import jsonable as _jsonable
 from twolevel.sim.trace import RunData
 
 #: The paper's collision line: centre-to-centre distance [m] below one vehicle length (4.22 m).
@@ -39,28 +40,6 @@ DECISION_LEVEL: Mapping[str, str] = _LEVEL
 LEVELS: tuple[str, ...] = ("high", "low", "nmpc")
 LIGHT_STATES: tuple[str, ...] = ("none", "green", "yellow", "red")
 RULE_PREFIX = "rob_"
-
-
-def _jsonable(value: Any) -> Any:
-    """Plain JSON values: dataclasses to dicts, NaN to None, ±inf to the strings "inf"/"-inf"."""
-    if is_dataclass(value) and not isinstance(value, type):
-        return {f.name: _jsonable(getattr(value, f.name)) for f in fields(value)}
-    if isinstance(value, Mapping):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        f = float(value)
-        if math.isnan(f):
-            return None
-        if math.isinf(f):
-            return "inf" if f > 0 else "-inf"
-        return f
-    return value
 
 
 class _Serialisable:

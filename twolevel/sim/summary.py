@@ -7,12 +7,12 @@ CLI's table. Times of the control step are wall-clock [ms]; everything else is s
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field, fields, is_dataclass
 from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["StepInfo", "Collision", "Closest", "RuleViolations", "RunSummary", "summarise"]
+__all__ = ["StepInfo", "Collision", "Closest", "RuleViolations", "RunSummary", "summarise", "jsonable"]
 
 #: Which controller level each decision belongs to (as the report counts them).
 LEVEL = {"mpc": "high", "fallback": "high", "sampled": "low", "brake": "low", "least_violation": "low", "nmpc": "nmpc"}
@@ -116,20 +116,29 @@ class RunSummary:
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready dict (infinities as the strings "inf"/"-inf", NaN as null)."""
-        return _clean(asdict(self))
+        return jsonable(self)
 
 
-def _clean(v: Any) -> Any:
-    if isinstance(v, dict):
-        return {k: _clean(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_clean(x) for x in v]
-    if isinstance(v, float):
-        if math.isnan(v):
+def jsonable(value: Any) -> Any:
+    """Plain JSON values: dataclasses to dicts, NaN to None, ±inf to the strings "inf"/"-inf"."""
+    if is_dataclass(value) and not isinstance(value, type):
+        return {f.name: jsonable(getattr(value, f.name)) for f in fields(value)}
+    if isinstance(value, Mapping):
+        return {str(k): jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [jsonable(v) for v in value]
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        f = float(value)
+        if math.isnan(f):
             return None
-        if math.isinf(v):
-            return "inf" if v > 0 else "-inf"
-    return v
+        if math.isinf(f):
+            return "inf" if f > 0 else "-inf"
+        return f
+    return value
 
 
 def _pct(a: np.ndarray, q: float) -> float:
