@@ -156,3 +156,38 @@ def test_control_signals_follow_the_timing_convention(tmp_path) -> None:
     assert r.controls[0, 0] >= 0.02 - 1e-6 and r.controls[0, 1] <= -0.5 + 1e-6   # now = u_0
     assert r.controls[1, 0] <= 1e-6                                              # sample 1 = u_1
     assert r.rule_robustness["nudge"] >= -1e-6
+
+
+def test_plans_keep_within_the_lateral_acceleration_limit(tmp_path) -> None:
+    # the pass of the test above at 12 m/s: before the steering bound the plan steered at full
+    # lock (0.5 rad, v²/l_f·tan δ ≈ 37 m/s²); the bound is set at the linearisation speeds (at
+    # least the current one), so a plan that speeds up more than the last one exceeds the limit
+    # by (v/v̄)² (here at most ~1.3)
+    w = make_world(tmp_path, "highway.yaml", HIGHWAY_EGO % (0.0, 12.0, 12.0), HIGHWAY_ROUTE,
+                   "[{id: slow, behaviour: constant_velocity, start: {lane: middle, s: 45}, speed: 3.0}]",
+                   extra="controller: {r_near: 40}")
+    rs = rules(tmp_path, "input float e\nno_collision = always[0:1] collision_free(4);\n"
+                         "on_road = always[0:1] ((e <= 4.5) and (e >= -4.5));\n")
+    ctrl = controller(w, [rs])
+    xs, res, _ = closed_loop(ctrl, w, 60)
+    p = ctrl.params
+    lat = [np.max(r.states[:-1, 3] ** 2 / p.l_f * np.abs(np.tan(r.controls[:, 0]))) for r in res if r.ok]
+    assert len(lat) >= 50 and max(lat) <= 1.35 * p.a_lat_max
+    _, e = _lateral(w, xs)
+    assert np.max(np.abs(e)) > 2.0                # it still changes lane to pass
+
+
+def test_steering_bound_follows_the_speed_and_the_road() -> None:
+    from twolevel.control.horizon import steering_bound
+    from twolevel.models.params import BicycleParams
+
+    p = BicycleParams()
+    v = np.array([0.0, 2.0, 13.0, 30.0])
+    b = steering_bound(v, np.zeros(4), p)
+    assert b[0] == b[1] == p.delta_max                      # slow: the steering limit
+    assert b[2] == pytest.approx(np.arctan(p.a_lat_max * p.l_f / 169.0))
+    assert np.all(np.diff(b) <= 0) and b[3] < b[2]
+    # a bend that needs more than the limit allows at that speed keeps what it needs (+ 0.02)
+    kappa = np.full(4, 0.05)
+    need = np.arctan(p.l_f * 0.05) + 0.02
+    assert np.all(steering_bound(v, kappa, p) >= min(need, p.delta_max) - 1e-12)

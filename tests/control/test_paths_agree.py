@@ -57,7 +57,7 @@ def test_mode_search_to_completion_and_highs_agree(tmp_path, seed: int) -> None:
 def test_the_only_good_plan_changes_lane(tmp_path) -> None:
     w = make_world(tmp_path, "highway.yaml", EGO % 14.0, ROUTE,
                    "[{id: slow, behaviour: constant_velocity, start: {lane: middle, s: 36}, speed: 2.0},"
-                   " {id: right, behaviour: constant_velocity, start: {lane: right, s: 30}, speed: 14.0}]",
+                   " {id: right, behaviour: constant_velocity, start: {lane: right, s: 22}, speed: 14.0}]",
                    extra="controller: {r_near: 60}", name="overtake")
     rs = rules(tmp_path, RULES)
     e = w.ego
@@ -67,5 +67,5 @@ def test_the_only_good_plan_changes_lane(tmp_path) -> None:
     assert exact.status == highs.status == "optimal" and exact.binaries > 0
     assert abs(exact.cost - highs.cost) <= 0.02 * exact.cost
     lateral = exact.states[-1, 1] - x0[1]
-    assert lateral > 1.0                          # out to the free left lane (the right one is taken)
+    assert lateral > 1.0                          # out to the free left lane (a car beside blocks the right)
     assert abs(highs.states[-1, 1] - exact.states[-1, 1]) < 0.5

@@ -277,3 +277,23 @@ def test_nan_robustness_does_not_count_as_holding() -> None:
                   robustness={"r": np.array([1.0, np.nan, 2.0])})
     [v] = s.violations
     assert v.steps == 1 and v.first_t == 0.1
+
+
+def test_dense_traffic_needs_no_braking_from_the_monitor(tmp_path: Path) -> None:
+    # regression: at 13 m/s the MPC's linearised model could steer at full lock (a lateral
+    # acceleration of ~35 m/s², no tyre gives that), its plan swerved toward the next lane, the
+    # low level braked with that steering and the car came to rest across the lane marking, with
+    # traffic passing within D_safe (no_collision violated for ~10 s). The steering bound of the
+    # lateral-acceleration limit keeps the plan one the detailed model follows.
+    text = (ROOT / "scenarios" / "scalability.yaml").read_text()
+    text = text.replace("../maps/", f"{ROOT / 'maps'}/").replace("../rules/", f"{ROOT / 'rules'}/")
+    text = text.replace("controller: {r_near: 40}", "controller: {r_near: 40, time_limit: 30}")
+    path = tmp_path / "dense.yaml"
+    path.write_text(text)
+    summary, diags = simulate_scenario(str(path), str(tmp_path / "run"), duration=4.0)
+    assert summary is not None, [d.message for d in diags]
+    assert summary.collisions == () and summary.min_gap > 0
+    assert summary.decisions.get("brake", 0) == 0 and summary.decisions.get("least_violation", 0) == 0
+    assert not any(v.rule == "no_collision" and v.steps for v in summary.violations)
+    run = read_run(tmp_path / "run")
+    assert np.all(run.columns["rob_no_collision"] >= 0)

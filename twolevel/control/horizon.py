@@ -24,7 +24,7 @@ from twolevel.world.signals import HorizonConstants, StopMemory, horizon_constan
 from twolevel.world.traffic import TrafficState
 from twolevel.world.world import World
 
-__all__ = ["StepData", "prepare_step", "direction_box", "wrap_to", "history_length"]
+__all__ = ["StepData", "prepare_step", "direction_box", "steering_bound", "wrap_to", "history_length"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -61,6 +61,7 @@ class StepData:
     e_lo: np.ndarray
     e_hi: np.ndarray
     term: TerminalStop = TerminalStop()
+    delta_hi: np.ndarray | None = None
 
 
 def wrap_to(angle: np.ndarray | float, ref: float) -> np.ndarray:
@@ -102,6 +103,19 @@ def direction_box(x0: np.ndarray, H: int, dt: float, params: BicycleParams, v_ca
     lo = np.stack([X + dx_lo, Y + dy_lo, psi - yaw - 0.05, np.zeros(H)], axis=1)
     hi = np.stack([X + dx_hi, Y + dy_hi, psi + yaw + 0.05, v_hi + 0.1], axis=1)
     return lo, hi
+
+
+def steering_bound(v: np.ndarray, kappa: np.ndarray, params: BicycleParams) -> np.ndarray:
+    """|δ_k| bound [rad] per step at speeds ``v`` (H,) [m/s] (the linearisation point's, at least
+    the current speed, so a plan that brakes less than the last one is still bounded): the steering limit,
+    or at speed the steering of ``params.a_lat_max`` lateral acceleration (|tan δ| ≤
+    a_lat_max·l_f/v²), never below what the route's curvature ``kappa`` (H,) [1/m] needs plus a
+    margin for corrections. The plan's own speeds may exceed ``v`` (accelerating more than the
+    last plan did), so its lateral acceleration may exceed the limit by (v_plan/v)²."""
+    v2 = np.maximum(np.asarray(v, float) ** 2, 1e-9)
+    lat = np.arctan(params.a_lat_max * params.l_f / v2)
+    need = np.abs(np.arctan(params.l_f * np.asarray(kappa, float))) + 0.02
+    return np.minimum(params.delta_max, np.maximum(lat, need))
 
 
 def _reference_controls(route_kappa: np.ndarray, v_ref: np.ndarray, dt: float, params: BicycleParams
@@ -229,7 +243,9 @@ def prepare_step(
         reach = min(max(s_line - stop_margin - s0, 0.5), world.settings.r_near)
         term = terminal_stop(s_line, s0 + d_brake, v_brake, decel=stop_decel, reach=reach, margin=stop_margin)
     return StepData(t, x0, np.asarray(u_prev, float), xs_bar, us_bar, A, B, c, omega, s_ref, s_bar, h_bar, p_bar,
-                    lo, hi, hc, width, e_lo, e_hi, term)
+                    lo, hi, hc, width, e_lo, e_hi, term, steering_bound(np.maximum(xs_bar[:-1, 3], x0[3]),
+                                                                        route.curvature_at(s_ref[:-1]),
+                                                                        params))
 
 
 def history_length(history: Mapping[str, np.ndarray] | None, names: set[str], depth: int) -> int:

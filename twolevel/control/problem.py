@@ -330,8 +330,8 @@ def assemble(
     (``MIL517`` warning) instead of making the step infeasible."""
     b = ModelBuilder()
     xb = b.add_vars("x", 4 * H, step.lo.ravel(), step.hi.ravel())
-    ub = b.add_vars("u", 2 * H, np.tile([-params.delta_max, params.a_min], H),
-                    np.tile([params.delta_max, params.a_max], H))
+    u_lo, u_hi = input_bounds(step, params)
+    ub = b.add_vars("u", 2 * H, u_lo.ravel(), u_hi.ravel())
     lay = Layout(xb.idx.reshape(H, 4), ub.idx.reshape(H, 2), P)
     _dynamics(b, step, lay)
     _guards(b, step, lay)
@@ -353,6 +353,15 @@ def assemble(
                                 f"required from step k = {t2 - P} of the horizon on (recovering)", Span("<mpc>"),
                                 hint="the plan restores the rule as fast as the dynamics allow"))
     return Assembled(model, lay, enc, sigs, diags)
+
+
+def input_bounds(step: StepData, params: BicycleParams) -> tuple[np.ndarray, np.ndarray]:
+    """Bounds (H, 2) of the inputs [δ rad, a m/s²]: the steering bound of the step (the lateral
+    acceleration limit at speed, :func:`twolevel.control.horizon.steering_bound`) and the
+    acceleration limits."""
+    H = step.A.shape[0]
+    d = np.full(H, params.delta_max) if step.delta_hi is None else step.delta_hi
+    return (np.stack([-d, np.full(H, params.a_min)], axis=1), np.stack([d, np.full(H, params.a_max)], axis=1))
 
 
 def shape_key(m: MilpModel) -> tuple:

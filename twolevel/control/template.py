@@ -28,7 +28,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from twolevel.control.horizon import StepData
-from twolevel.control.problem import (Assembled, Weights, dynamics_values, guard_values, others_of, set_cost,
+from twolevel.control.problem import (Assembled, Weights, dynamics_values, guard_values, input_bounds, others_of, set_cost,
                                       trace_signals)
 from twolevel.milp.affine_block import AffineBlock
 from twolevel.milp.collision import CollisionBlock, collision_free_builtin
@@ -123,6 +123,8 @@ def refresh(tpl: StepTemplate, step: StepData, requirements: Sequence[Requiremen
     lb, ub = m.lb.copy(), m.ub.copy()
     lb[lay.x.ravel()] = step.lo.ravel()
     ub[lay.x.ravel()] = step.hi.ravel()
+    u_lo, u_hi = input_bounds(step, params)
+    lb[lay.u.ravel()], ub[lay.u.ravel()] = u_lo.ravel(), u_hi.ravel()
     P = lay.P
     cf = collision_free_builtin("x", "y", others_of(step, P), ids=np.asarray(step.hc.index, np.int64), pad=pad)
     enc = Encoder(_Bounds(lb, ub), sigs, dt, length=P + 1 + H, builtins={"collision_free": cf},  # type: ignore[arg-type]

@@ -91,6 +91,10 @@ class BicycleParams:
     """Largest commanded acceleration [m/s²] (a comfortable, reachable drive acceleration)."""
     v_max: float = 30.0
     """Speed bound used by the MPC [m/s]."""
+    a_lat_max: float = 4.0
+    """Largest planned lateral acceleration v²/l_f·tan δ [m/s²]: at speed it bounds the steering
+    to |tan δ| ≤ a_lat_max·l_f/v² (well inside the tyres' μ·g ≈ 9.8 m/s², where the detailed
+    model follows the kinematic plan; it also keeps the linearised model near its point)."""
 
     def validate(self) -> None:
         """Raise :class:`InvalidParameterError` on non-physical values."""
@@ -100,6 +104,8 @@ class BicycleParams:
             raise InvalidParameterError("delta_max", self.delta_max, "must be in (0, 1.5) rad")
         if self.a_min >= 0 or self.a_max <= 0:
             raise InvalidParameterError("a_min/a_max", (self.a_min, self.a_max), "need a_min < 0 < a_max")
+        if not self.a_lat_max > 0:
+            raise InvalidParameterError("a_lat_max", self.a_lat_max, "must be > 0")
 
     def with_overrides(self, mapping: Mapping[str, Any]) -> "BicycleParams":
         """A copy with the named fields replaced; unknown names raise :class:`UnknownParameterError`."""
