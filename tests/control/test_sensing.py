@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -60,3 +62,42 @@ def test_batched_prediction_equals_signals_along() -> None:
         for name in ("s", "e", "v_max", "d_stop", "light_red", "d_light", "d_lead", "v_lead", "min_gap", "n_near"):
             np.testing.assert_allclose(got[name][k], ref[name], rtol=0, atol=1e-6, err_msg=f"{name} row {k}")
     assert np.isfinite(got["d_stop"]).any() and np.isfinite(got["d_lead"]).any()
+
+
+@functools.lru_cache(maxsize=1)
+def _curved_world():
+    parts = ", ".join(f"{{id: c{i}, behaviour: constant_velocity, start: {{lane: east, s: {10 * i}}}, speed: 5}}"
+                      for i in range(6))
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "curved.yaml"
+        path.write_text(f"kind: scenario\nname: curved\nmap: {ROOT / 'maps' / 'curved_road.yaml'}\n"
+                        "ego: {start: {lane: east, s: 0}, speed: 5}\n"
+                        "route: {start: {lane: east, s: 0}, goal: {lane: east, s: 270}}\n"
+                        f"participants: [{parts}]\nrun: {{duration: 10, seed: 0}}\n")
+        scn, diags = load_scenario(str(path))
+        assert scn is not None, [d.message for d in diags]
+        return build_world(scn)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 1), st.floats(0, 260), st.floats(0, 15), st.floats(-0.6, 0.6)),
+                min_size=1, max_size=6), st.floats(0, 260))
+def test_predicted_vehicles_project_as_the_whole_route_search(cars, ego_s) -> None:
+    # others_predicted searches each predicted sample only near where the vehicle's motion along
+    # the route puts it; on the curved road (50 m and 40 m bends, vehicles off their lane's
+    # heading) that must give the nearest route point as the search over the whole route does
+    w = _curved_world()
+    lane = np.array([c[0] for c in cars])
+    s_lane = np.array([c[1] for c in cars])
+    p0, h0 = w.lanes.pose(lane, s_lane)
+    n = len(cars)
+    traffic = TrafficState(0.0, p0[:, 0], p0[:, 1], h0 + np.array([c[3] for c in cars]), np.array([c[2] for c in cars]),
+                           lane, s_lane, np.zeros(n), np.ones(n, bool), np.zeros(n), np.full(n, -1))
+    ego = w.route.position(np.array([ego_s]))[0]
+    got = others_predicted(w, traffic, float(ego[0]), float(ego[1]), ego_s, 8.0, 10, 0.1)
+    if got.n == 0:
+        return
+    s, e = w.route.local_coordinates(np.stack([got.x.ravel(), got.y.ravel()], axis=1))
+    near = np.abs(e) < 10.0  # points far off the road may have two nearest route points
+    np.testing.assert_allclose(got.s.ravel()[near], s[near], atol=1e-6)
+    np.testing.assert_allclose(got.e.ravel()[near], e[near], atol=1e-6)
