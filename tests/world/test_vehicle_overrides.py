@@ -32,3 +32,16 @@ def test_physically_invalid_override_is_out_of_range(tmp_path: Path) -> None:
     path = _scenario(tmp_path, "    l_f: -2.0\n")
     diags = [d for d in check_world_file(str(path)) if d.code == "YML414"]
     assert len(diags) == 1 and diags[0].span.line == 7 and "l_f" in diags[0].message
+
+
+def test_lateral_acceleration_limit_is_a_bicycle_parameter(tmp_path: Path) -> None:
+    from twolevel.control.high_level import HighLevelController, MPCSettings
+    from twolevel.world.world import build_world
+
+    path = _scenario(tmp_path, "    a_lat_max: 6.5\n")
+    scenario, diags = load_scenario(path)
+    assert scenario is not None and [d.code for d in diags if d.is_error] == []
+    ctrl, _ = HighLevelController.from_world(build_world(scenario), MPCSettings())
+    assert ctrl is not None and ctrl.params.a_lat_max == 6.5   # the MPC plans with the override
+    bad = [d for d in check_world_file(str(_scenario(tmp_path, "    a_lat_max: 0\n"))) if d.code == "YML414"]
+    assert len(bad) == 1 and "a_lat_max" in bad[0].message
