@@ -51,7 +51,7 @@ def test_batched_prediction_equals_signals_along() -> None:
                            np.array([0, 1]), np.array([s0 + 11.0, 200.0]), np.zeros(2), np.ones(2, bool), np.zeros(2),
                            np.full(2, -1))
     parts_len = np.full(2, 4.22)
-    others = others_predicted(w, traffic, float(pts[0, 0, 0]), float(pts[0, 0, 1]), s0, float(v0[0]), T - 1, dt)
+    others = others_predicted(w, traffic, float(pts[0, 0, 0]), float(pts[0, 0, 1]), s0, T - 1, dt)
     t0 = 3.0
     got = sense(w, t0, dt, Memory.fresh(w), others, pts[..., 0], pts[..., 1], psi, v, np.zeros((K, T)),
                 np.zeros((K, T)))
@@ -94,7 +94,7 @@ def test_predicted_vehicles_project_as_the_whole_route_search(cars, ego_s) -> No
     traffic = TrafficState(0.0, p0[:, 0], p0[:, 1], h0 + np.array([c[3] for c in cars]), np.array([c[2] for c in cars]),
                            lane, s_lane, np.zeros(n), np.ones(n, bool), np.zeros(n), np.full(n, -1))
     ego = w.route.position(np.array([ego_s]))[0]
-    got = others_predicted(w, traffic, float(ego[0]), float(ego[1]), ego_s, 8.0, 10, 0.1)
+    got = others_predicted(w, traffic, float(ego[0]), float(ego[1]), ego_s, 10, 0.1)
     if got.n == 0:
         return
     s, e = w.route.local_coordinates(np.stack([got.x.ravel(), got.y.ravel()], axis=1))

@@ -39,7 +39,8 @@ class StepData:
     ``e_lo``/``e_hi`` (H,) [m]: bounds on the lateral offset e_k ≈ n̄_kᵀ(p_k − p̄_k) for k = 1..H
     (:func:`twolevel.control.guards.drivable_band`, widened to include where the ego and the
     linearisation point already are); ``term``: the can-still-stop terminal condition
-    (:func:`twolevel.control.guards.terminal_stop`, inactive when no line applies)."""
+    (:func:`twolevel.control.guards.terminal_stop`, inactive when no line applies); ``delta_hi``
+    (H,) [rad]: the steering bound per step (:func:`steering_bound`; None: the steering limit)."""
 
     t: float
     x0: np.ndarray

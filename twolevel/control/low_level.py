@@ -276,7 +276,7 @@ class LowLevelController:
         u_star = np.asarray(u_star, dtype=float).reshape(H, 2)
         x0 = np.asarray(x0, dtype=float)
         v_now = float(x0[3])
-        others = others_predicted(self.world, traffic, float(x0[0]), float(x0[1]), s0, v_now, H, dt)
+        others = others_predicted(self.world, traffic, float(x0[0]), float(x0[1]), s0, H, dt)
         P = self._history_length(history)
         hist = history or {}
 

@@ -28,8 +28,8 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from twolevel.control.horizon import StepData
-from twolevel.control.problem import (Assembled, Weights, dynamics_values, guard_values, input_bounds, others_of, set_cost,
-                                      trace_signals)
+from twolevel.control.problem import (Assembled, Weights, dynamics_values, guard_values, input_bounds, others_of,
+                                      set_cost, trace_signals)
 from twolevel.milp.affine_block import AffineBlock
 from twolevel.milp.collision import CollisionBlock, collision_free_builtin
 from twolevel.milp.encode import AffineSignal, Emission, Encoder, Requirement
