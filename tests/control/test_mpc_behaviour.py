@@ -87,14 +87,19 @@ def test_stays_behind_a_stopped_vehicle_it_cannot_pass(tmp_path) -> None:
     assert sum(r.status == "fallback" for r in res) == 0
 
 
-def test_passes_a_slow_vehicle_when_the_next_lane_is_free(tmp_path) -> None:
-    # the 1-norm diamond must fit beside the vehicle within the road: d = 4 < lane offset + margin
+def _slow_vehicle_ahead(tmp_path):
+    """12 m/s behind a car at 3 m/s in the middle lane of the free highway; the 1-norm diamond
+    (d = 4) fits beside it within the road (lane offset + margin)."""
     w = make_world(tmp_path, "highway.yaml", HIGHWAY_EGO % (0.0, 12.0, 12.0), HIGHWAY_ROUTE,
                    "[{id: slow, behaviour: constant_velocity, start: {lane: middle, s: 45}, speed: 3.0}]",
                    extra="controller: {r_near: 40}")
     rs = rules(tmp_path, "input float e\nno_collision = always[0:1] collision_free(4);\n"
                          "on_road = always[0:1] ((e <= 4.5) and (e >= -4.5));\n")
-    ctrl = controller(w, [rs])
+    return w, controller(w, [rs])
+
+
+def test_passes_a_slow_vehicle_when_the_next_lane_is_free(tmp_path) -> None:
+    w, ctrl = _slow_vehicle_ahead(tmp_path)
     xs, res, tr = closed_loop(ctrl, w, 80)
     ox = np.array([t.x[0] for t in tr])
     oy = np.array([t.y[0] for t in tr])
@@ -163,12 +168,7 @@ def test_plans_keep_within_the_lateral_acceleration_limit(tmp_path) -> None:
     # lock (0.5 rad, v²/l_f·tan δ ≈ 37 m/s²); the bound is set at the linearisation speeds (at
     # least the current one), so a plan that speeds up more than the last one exceeds the limit
     # by (v/v̄)² (here at most ~1.3)
-    w = make_world(tmp_path, "highway.yaml", HIGHWAY_EGO % (0.0, 12.0, 12.0), HIGHWAY_ROUTE,
-                   "[{id: slow, behaviour: constant_velocity, start: {lane: middle, s: 45}, speed: 3.0}]",
-                   extra="controller: {r_near: 40}")
-    rs = rules(tmp_path, "input float e\nno_collision = always[0:1] collision_free(4);\n"
-                         "on_road = always[0:1] ((e <= 4.5) and (e >= -4.5));\n")
-    ctrl = controller(w, [rs])
+    w, ctrl = _slow_vehicle_ahead(tmp_path)
     xs, res, _ = closed_loop(ctrl, w, 60)
     p = ctrl.params
     lat = [np.max(r.states[:-1, 3] ** 2 / p.l_f * np.abs(np.tan(r.controls[:, 0]))) for r in res if r.ok]
