@@ -264,19 +264,20 @@ class LowLevelController:
     # ------------------------------------------------------------------ one step
     def decide(self, x0: np.ndarray, u_star: np.ndarray, t: float, traffic: TrafficState, memory: Memory, s0: float,
                history: Mapping[str, np.ndarray] | None = None, *, target: np.ndarray | None = None,
-               step: int = 0) -> Decision:
+               step: int = 0, now: Others | None = None) -> Decision:
         """The control to apply now from the detailed state ``x0`` (12,), the MPC's controls
         ``u_star`` (H, 2) [δ rad, a m/s²], time ``t`` [s], the traffic now, the sensing memory
         before this step, the ego's route position ``s0`` [m], the recorded ``history`` of every
         signal (oldest first, excluding now), the plan's states ``target`` (H+1, 4) [X, Y, ψ, v]
-        and the step number (seeds the sampling)."""
+        and the step number (seeds the sampling); ``now``: the vehicles sensed now
+        (:func:`~twolevel.control.sensing.others_now` at x0, s0), when the caller has them."""
         tm: dict[str, float] = {}
         t_start = time.perf_counter()
         p, st, H, dt = self.params, self.settings, self.H, self.dt
         u_star = np.asarray(u_star, dtype=float).reshape(H, 2)
         x0 = np.asarray(x0, dtype=float)
         v_now = float(x0[3])
-        others = others_predicted(self.world, traffic, float(x0[0]), float(x0[1]), s0, H, dt)
+        others = others_predicted(self.world, traffic, float(x0[0]), float(x0[1]), s0, H, dt, now=now)
         P = self._history_length(history)
         hist = history or {}
 

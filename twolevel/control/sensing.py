@@ -101,13 +101,15 @@ def others_now(world: World, traffic: TrafficState, x: float, y: float, s0: floa
 
 
 def others_predicted(world: World, traffic: TrafficState, x: float, y: float, s0: float, H: int,
-                     dt: float) -> Others:
+                     dt: float, *, now: Others | None = None) -> Others:
     """Constant-velocity predictions over k = 0..H of the vehicles within ``r_near`` now (as
     :func:`~twolevel.world.signals.horizon_constants` predicts them); ``s0`` [m] is the ego's
     route position. Each vehicle's predicted sample is projected near where its motion along the
     route puts it (s_i + v_i·cos(ψ_i − route heading)·t): a narrow search instead of one as wide
-    as everything reachable."""
-    now = others_now(world, traffic, x, y, s0)
+    as everything reachable. ``now``: :func:`others_now` of the same arguments, when the caller
+    already has it."""
+    if now is None:
+        now = others_now(world, traffic, x, y, s0)
     idx = now.index
     tk = dt * np.arange(H + 1)
     v = traffic.v[idx]

@@ -360,7 +360,8 @@ class _Loop:
             if u_star.shape != (H, 2) or not np.all(np.isfinite(u_star)):
                 u_star = np.tile([0.0, self.hl.params.a_min], (H, 1))
             if self.monitor:
-                dec = self.ll.decide(x, u_star, t, traffic, memory, s0, past, target=plan.states, step=k)
+                dec = self.ll.decide(x, u_star, t, traffic, memory, s0, past, target=plan.states, step=k,
+                                     now=others)
                 control, accel, decision, tried = dec.control, dec.accel, dec.decision, dec.candidates
                 why = " ".join(dec.violated)
             else:
