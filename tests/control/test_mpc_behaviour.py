@@ -53,13 +53,18 @@ def test_respects_a_speed_limit_below_the_desired_speed(tmp_path) -> None:
     assert all(r.rule_robustness["speed_limit"] >= 0 for r in res)
 
 
-def test_stops_before_a_stop_line(tmp_path) -> None:
-    w = make_world(tmp_path, "urban.yaml", "{start: {lane: north, s: 55}, speed: 6.0}",
-                   "{start: {lane: north, s: 55}, goal: {lane: north, s: 200}}")
+def _stop_sign_ahead(tmp_path, s: float):
+    """The urban map's north lane from route position ``s`` [m] at 6 m/s, with a stop-sign rule."""
+    w = make_world(tmp_path, "urban.yaml", "{start: {lane: north, s: %g}, speed: 6.0}" % s,
+                   "{start: {lane: north, s: %g}, goal: {lane: north, s: 200}}" % s)
     stop = rules(tmp_path, (
         "input float v\ninput float d_stop\n"
         "stop_sign = always[0:1] ((d_stop <= 0) -> once[0:10] ((v <= 0.1) and (d_stop <= 3)));\n"))
-    ctrl = controller(w, [stop])
+    return w, controller(w, [stop])
+
+
+def test_stops_before_a_stop_line(tmp_path) -> None:
+    w, ctrl = _stop_sign_ahead(tmp_path, 55)
     xs, res, _ = closed_loop(ctrl, w, 90, history_names=("v", "d_stop", "s"))
     s, _ = _lateral(w, xs)
     line = float(w.route_stops[0])
@@ -118,12 +123,7 @@ def test_stops_before_a_stop_line_straight_and_in_lane(tmp_path) -> None:
     # shortened the linearised route progress, which "helped" the stop rule) and to reach the line
     # at the end of the horizon at speed; now the terminal can-still-stop condition brakes from
     # first sight and the plan keeps straight in its lane
-    w = make_world(tmp_path, "urban.yaml", "{start: {lane: north, s: 66}, speed: 6.0}",
-                   "{start: {lane: north, s: 66}, goal: {lane: north, s: 200}}")
-    stop = rules(tmp_path, (
-        "input float v\ninput float d_stop\n"
-        "stop_sign = always[0:1] ((d_stop <= 0) -> once[0:10] ((v <= 0.1) and (d_stop <= 3)));\n"))
-    ctrl = controller(w, [stop])
+    w, ctrl = _stop_sign_ahead(tmp_path, 66)
     x0 = np.array([w.ego.x, w.ego.y, w.ego.psi + 0.04, w.ego.v])
     xs, res, _ = closed_loop(ctrl, w, 45, x0=x0, history_names=("v", "d_stop", "s"))
     s, e = _lateral(w, xs)
