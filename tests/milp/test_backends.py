@@ -9,9 +9,10 @@ import pytest
 
 from twolevel.milp.builder import ModelBuilder
 from twolevel.milp.encode import Requirement, encode
-from twolevel.milp.highs import Status, solve_highs, write_model
+from twolevel.milp.highs import CAPABILITIES as HIGHS, solve_highs, write_model
 from twolevel.milp.model import PatternCache
-from twolevel.milp.qp import FixedModeQP
+from twolevel.milp.qp import CAPABILITIES as CLARABEL, FixedModeQP
+from twolevel.milp.solution import Status
 from twolevel.milp.transform import l1_surrogate
 from twolevel.stl import ast
 
@@ -165,3 +166,29 @@ def test_block_update_in_place_changes_only_values() -> None:
     assert np.array_equal(model.A.data, data_before)
     model.set_row_bounds("dyn", 1.0, 1.0)
     assert np.all(model.row_lo[rows] == 1.0)
+
+
+def test_highs_does_what_it_declares() -> None:
+    """HiGHS branches on the binaries and minimises only the linear part of the cost."""
+    assert HIGHS.integer and not HIGHS.quadratic
+    model, _, _ = _mpc()
+    assert model.P is not None and model.P.nnz
+    s = solve_highs(model)
+    assert s.ok
+    ints = s.x[model.integrality]
+    assert ints.size and np.allclose(ints, np.round(ints))
+    assert s.objective == pytest.approx(float(model.q @ s.x) + model.c0, rel=1e-7, abs=1e-7)
+
+
+def test_clarabel_does_what_it_declares() -> None:
+    """Clarabel keeps the integer columns where the mode puts them and minimises the whole
+    quadratic cost."""
+    assert CLARABEL.quadratic and not CLARABEL.integer and CLARABEL.in_place_update
+    model, _, _ = _mpc()
+    qp = FixedModeQP(model)
+    solved = [(xi, qp.solve(xi)) for xi in _one_hot_modes(model, qp)]
+    solved = [(xi, r) for xi, r in solved if r.ok]
+    assert solved
+    for xi, r in solved:
+        assert np.array_equal(r.x[qp.ints], xi)
+        assert r.objective == pytest.approx(model.objective(r.x), rel=1e-9, abs=1e-9)

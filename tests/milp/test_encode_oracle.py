@@ -9,7 +9,8 @@ import pytest
 
 from twolevel.milp.builder import ModelBuilder
 from twolevel.milp.encode import Requirement, encode
-from twolevel.milp.highs import Status, solve_highs
+from twolevel.milp.highs import solve_highs
+from twolevel.milp.solution import Status
 from twolevel.monitor.robustness import robustness
 
 from milp_systems import DT, H, PAST, T, double_integrator, random_formula, rollout

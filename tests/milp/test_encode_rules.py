@@ -8,7 +8,8 @@ import pytest
 from twolevel.milp.builder import ModelBuilder
 from twolevel.milp.encode import (AffineSignal, Requirement, collision_free_builtin, encode,
                                   reachable_box)
-from twolevel.milp.highs import Status, solve_highs
+from twolevel.milp.highs import solve_highs
+from twolevel.milp.solution import Status
 from twolevel.stl import ast
 
 from milp_systems import DT, H, PAST, T, double_integrator, random_formula

@@ -11,9 +11,10 @@ import pytest
 from milp_systems import DT, H, T, double_integrator, random_formula
 from twolevel.milp.builder import ModelBuilder
 from twolevel.milp.encode import Requirement, encode
-from twolevel.milp.highs import Status, solve_highs
+from twolevel.milp.highs import solve_highs
 from twolevel.milp.modes import ModeSearch
 from twolevel.milp.qp import FixedModeQP
+from twolevel.milp.solution import Status
 
 
 def _model(seed: int, quadratic: bool, depth: int = 3):

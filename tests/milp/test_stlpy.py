@@ -21,7 +21,8 @@ from stlpy import benchmarks as bm  # noqa: E402
 
 from twolevel.milp.builder import ModelBuilder  # noqa: E402
 from twolevel.milp.encode import AffineSignal, Requirement, encode  # noqa: E402
-from twolevel.milp.highs import Status, solve_highs  # noqa: E402
+from twolevel.milp.highs import solve_highs  # noqa: E402
+from twolevel.milp.solution import Status  # noqa: E402
 from twolevel.stl import ast  # noqa: E402
 
 X_MIN, X_MAX = np.array([0.0, 0.0, -1.0, -1.0]), np.array([10.0, 10.0, 1.0, 1.0])

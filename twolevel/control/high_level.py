@@ -51,10 +51,10 @@ from twolevel.control.problem import Assembled, Weights, assemble, shape_key
 from twolevel.control.template import TemplateCache, refresh, template_of
 from twolevel.diagnostics import Diagnostic, Span
 from twolevel.milp.encode import Requirement
-from twolevel.milp.highs import Status
 from twolevel.milp.model import PatternCache
 from twolevel.milp.modes import ModeSearch
 from twolevel.milp.qp import FixedModeQP
+from twolevel.milp.solution import Status
 from twolevel.models import bicycle
 from twolevel.models.params import BicycleParams
 from twolevel.stl import analysis

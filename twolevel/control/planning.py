@@ -108,7 +108,8 @@ def _read_trace(path: str, at: float) -> tuple[dict[str, np.ndarray] | None, lis
 def explain_infeasibility(ctrl: Any, step: Any, past: Any, P: int) -> tuple[str, ...]:
     """The rules that conflict: the smallest set (single rules first, then pairs) whose removal
     makes the step feasible; empty when even no rules is infeasible or nothing single/pairwise helps."""
-    from twolevel.milp.highs import Status, solve_highs
+    from twolevel.milp.highs import solve_highs
+    from twolevel.milp.solution import Status
 
     names = [r.name for r in ctrl.rules]
 

@@ -20,7 +20,8 @@ from twolevel.control.horizon import StepData
 from twolevel.control.problem import Assembled
 from twolevel.diagnostics import Span
 from twolevel.milp.encode import AffineSignal
-from twolevel.milp.highs import Status, solve_highs
+from twolevel.milp.highs import solve_highs
+from twolevel.milp.solution import Status
 from twolevel.milp.transform import l1_surrogate
 
 if TYPE_CHECKING:

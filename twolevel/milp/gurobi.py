@@ -1,6 +1,6 @@
 """Optional Gurobi backend (the paper's solver): the MIQP as it is, when gurobipy is importable.
 
-gurobipy is imported lazily; :func:`available` says whether it can be. Note (anchors.md): the
+gurobipy is imported lazily; :func:`available` says whether it can be. Note: the
 pip licence refuses quadratic models above 200 variables.
 """
 
@@ -10,10 +10,12 @@ import time
 
 import numpy as np
 
-from twolevel.milp.highs import Solution, Status
 from twolevel.milp.model import MilpModel
+from twolevel.milp.solution import Capabilities, Solution, Status
 
-__all__ = ["available", "solve_gurobi"]
+__all__ = ["CAPABILITIES", "available", "solve_gurobi"]
+
+CAPABILITIES = Capabilities("gurobi", integer=True, quadratic=True)
 
 
 def available() -> bool:
@@ -57,9 +59,13 @@ def solve_gurobi(model: MilpModel, *, time_limit: float | None = None, mip_gap: 
     t1 = time.perf_counter()
     m.optimize()
     t2 = time.perf_counter()
-    st = m.Status
-    status = {gp.GRB.OPTIMAL: Status.OPTIMAL, gp.GRB.INFEASIBLE: Status.INFEASIBLE,
-              gp.GRB.TIME_LIMIT: Status.TIME_LIMIT}.get(st, Status.ERROR)
+    status = _status(m.Status, gp)
     xv = np.asarray(x.X) if m.SolCount > 0 else None
     obj_v = float(m.ObjVal) if xv is not None else float("nan")
     return Solution(status, xv, obj_v, (t2 - t1) * 1e3, (t1 - t0) * 1e3, float(getattr(m, "MIPGap", np.nan)))
+
+
+def _status(code: int, gp) -> Status:  # type: ignore[no-untyped-def]
+    """Gurobi's model status → :class:`Status`."""
+    return {gp.GRB.OPTIMAL: Status.OPTIMAL, gp.GRB.INFEASIBLE: Status.INFEASIBLE,
+            gp.GRB.TIME_LIMIT: Status.TIME_LIMIT}.get(code, Status.ERROR)

@@ -8,44 +8,17 @@ counterpart first (:func:`twolevel.milp.transform.l1_surrogate`) or use :mod:`tw
 
 from __future__ import annotations
 
-import enum
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from twolevel.milp.model import MilpModel
+from twolevel.milp.solution import Capabilities, Solution, Status
 
-__all__ = ["Status", "Solution", "solve_highs", "write_model"]
+__all__ = ["CAPABILITIES", "solve_highs", "write_model"]
 
-
-class Status(str, enum.Enum):
-    """Outcome of a solve, the same for every backend."""
-
-    OPTIMAL = "optimal"
-    INFEASIBLE = "infeasible"
-    UNBOUNDED = "unbounded"
-    TIME_LIMIT = "time_limit"
-    ERROR = "error"
-
-
-@dataclass(frozen=True)
-class Solution:
-    """A backend's answer. ``x`` is None when there is no primal point; on ``time_limit`` it is
-    the incumbent if one was found. Times in milliseconds [ms]."""
-
-    status: Status
-    x: np.ndarray | None
-    objective: float
-    solve_ms: float
-    setup_ms: float = 0.0
-    gap: float = float("nan")
-    info: dict[str, object] = field(default_factory=dict)
-
-    @property
-    def ok(self) -> bool:
-        return self.status is Status.OPTIMAL
+CAPABILITIES = Capabilities("highs", integer=True, quadratic=False, mip_start=True, export=True)
 
 
 def _highs():

@@ -33,8 +33,8 @@ from typing import Sequence
 
 import numpy as np
 
-from twolevel.milp.highs import Status
 from twolevel.milp.qp import FixedModeQP
+from twolevel.milp.solution import Status
 
 __all__ = ["ModeResult", "ModeSearch"]
 

@@ -18,10 +18,12 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
-from twolevel.milp.highs import Solution, Status
 from twolevel.milp.model import MilpModel, _build_pattern
+from twolevel.milp.solution import Capabilities, Solution, Status
 
-__all__ = ["FixedModeQP"]
+__all__ = ["CAPABILITIES", "FixedModeQP"]
+
+CAPABILITIES = Capabilities("clarabel", integer=False, quadratic=True, in_place_update=True)
 
 _UNSET = object()
 
