@@ -12,8 +12,8 @@ from twolevel.milp.builder import ModelBuilder
 from twolevel.milp.encode import AffineSignal, Requirement, collision_free_builtin, encode, reachable_box
 from twolevel.milp.highs import solve_highs
 from twolevel.milp.model import PatternCache
-from twolevel.milp.qp import FixedModeQP
-from twolevel.milp.transform import l1_surrogate
+from twolevel.milp.clarabel import FixedModeQP
+from twolevel.milp.l1_surrogate import l1_surrogate
 from twolevel.stl import ast
 
 H, DT, VMAX = 10, 0.1, 15.0

@@ -11,9 +11,9 @@ from twolevel.milp.builder import ModelBuilder
 from twolevel.milp.encode import Requirement, encode
 from twolevel.milp.highs import CAPABILITIES as HIGHS, solve_highs, write_model
 from twolevel.milp.model import PatternCache
-from twolevel.milp.qp import CAPABILITIES as CLARABEL, FixedModeQP
+from twolevel.milp.clarabel import CAPABILITIES as CLARABEL, FixedModeQP
 from twolevel.milp.solution import Status
-from twolevel.milp.transform import l1_surrogate
+from twolevel.milp.l1_surrogate import l1_surrogate
 from twolevel.stl import ast
 
 from milp_systems import DT, H, PAST, double_integrator

@@ -13,7 +13,7 @@ from twolevel.milp.builder import ModelBuilder
 from twolevel.milp.encode import Requirement, encode
 from twolevel.milp.highs import solve_highs
 from twolevel.milp.modes import ModeSearch
-from twolevel.milp.qp import FixedModeQP
+from twolevel.milp.clarabel import FixedModeQP
 from twolevel.milp.solution import Status
 
 

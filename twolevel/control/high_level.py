@@ -53,7 +53,7 @@ from twolevel.diagnostics import Diagnostic, Span
 from twolevel.milp.encode import Requirement
 from twolevel.milp.model import PatternCache
 from twolevel.milp.modes import ModeSearch
-from twolevel.milp.qp import FixedModeQP
+from twolevel.milp.clarabel import FixedModeQP
 from twolevel.milp.solution import Status
 from twolevel.models import bicycle
 from twolevel.models.params import BicycleParams

@@ -200,7 +200,7 @@ def plan_scenario(
     emitted = None
     if emit is not None:
         from twolevel.milp.highs import write_model
-        from twolevel.milp.transform import l1_surrogate
+        from twolevel.milp.l1_surrogate import l1_surrogate
 
         ctrl.reset()
         step, past_s, P = ctrl.prepare(ego, t0, traffic, history)

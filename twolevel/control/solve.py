@@ -22,7 +22,7 @@ from twolevel.diagnostics import Span
 from twolevel.milp.encode import AffineSignal
 from twolevel.milp.highs import solve_highs
 from twolevel.milp.solution import Status
-from twolevel.milp.transform import l1_surrogate
+from twolevel.milp.l1_surrogate import l1_surrogate
 
 if TYPE_CHECKING:
     from twolevel.control.high_level import HighLevelController, PlanResult

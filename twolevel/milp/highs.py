@@ -2,8 +2,9 @@
 
 highspy is imported lazily, on first solve. The model goes in through one ``passModel`` call
 with the CSC arrays of :class:`~twolevel.milp.model.MilpModel`; a quadratic cost is not passed
-(HiGHS's QP solver failed on most polish QPs of the prototype, anchors.md): turn it into its L1
-counterpart first (:func:`twolevel.milp.transform.l1_surrogate`) or use :mod:`twolevel.milp.qp`.
+(HiGHS's QP solver failed on most of the MPC's polish QPs when it was tried): turn it into its L1
+counterpart first (:func:`twolevel.milp.l1_surrogate.l1_surrogate`) or use
+:mod:`twolevel.milp.clarabel`.
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ A :class:`MilpModel` is
 * ``P`` is the **upper triangle** (diagonal included) of the symmetric Hessian, CSC — Clarabel's
   convention. When the quadratic cost comes from weighted residuals (the MPC's least squares)
   they are kept too, in :class:`Residuals` ``Σ_i w_i (F_i x − g_i)²``, so the cost can be turned
-  into its L1 counterpart (:func:`twolevel.milp.transform.l1_surrogate`).
+  into its L1 counterpart (:func:`twolevel.milp.l1_surrogate.l1_surrogate`).
 * every binary belongs to exactly one :class:`Disjunction`: one binary per disjunct, the rows
   that the binary switches on (big-M rows ``expr + M·(1 − b) ≥ 0``) and the enclosing guard. A
   *mode* picks one disjunct per disjunction; with the mode fixed the problem is convex.
@@ -34,6 +34,7 @@ __all__ = [
     "MilpModel",
     "Pattern",
     "PatternCache",
+    "build_pattern",
     "csc_from_coo",
 ]
 
@@ -96,7 +97,9 @@ class Pattern:
         return data
 
 
-def _build_pattern(rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int]) -> Pattern:
+def build_pattern(rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int]) -> Pattern:
+    """The CSC pattern of the COO positions (``rows``, ``cols``) in a matrix of ``shape``
+    (duplicate positions share one entry)."""
     order = np.lexsort((rows, cols))
     r, c = rows[order], cols[order]
     if r.size:
@@ -121,7 +124,7 @@ def csc_from_coo(
 ) -> tuple[sp.csc_matrix, Pattern]:
     """CSC matrix from COO triplets keeping explicit zeros; the pattern comes from ``cache`` when
     the same (rows, cols, shape) was seen before."""
-    pat = cache.get(rows, cols, shape) if cache is not None else _build_pattern(rows, cols, shape)
+    pat = cache.get(rows, cols, shape) if cache is not None else build_pattern(rows, cols, shape)
     return pat.matrix(vals), pat
 
 
@@ -145,7 +148,7 @@ class PatternCache:
             self.hits += 1
             return found[2]
         self.misses += 1
-        pat = _build_pattern(rows, cols, shape)
+        pat = build_pattern(rows, cols, shape)
         self._store[key] = (rows.copy(), cols.copy(), pat)
         while len(self._store) > self.capacity:
             self._store.pop(next(iter(self._store)))

@@ -3,7 +3,7 @@
 Every binary of a :class:`~twolevel.milp.model.MilpModel` belongs to one
 :class:`~twolevel.milp.model.Disjunction`. A *mode* picks one disjunct per disjunction: an int
 array ``choice`` (D,), ``-1`` meaning undecided (its cover row disabled, its big-M rows off). With
-the mode fixed the problem is the convex QP of :class:`~twolevel.milp.qp.FixedModeQP`; switching
+the mode fixed the problem is the convex QP of :class:`~twolevel.milp.clarabel.FixedModeQP`; switching
 mode rewrites values only, on the same solver object.
 
 :meth:`ModeSearch.run`:
@@ -33,7 +33,7 @@ from typing import Sequence
 
 import numpy as np
 
-from twolevel.milp.qp import FixedModeQP
+from twolevel.milp.clarabel import FixedModeQP
 from twolevel.milp.solution import Status
 
 __all__ = ["ModeResult", "ModeSearch"]

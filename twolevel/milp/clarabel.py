@@ -18,7 +18,7 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
-from twolevel.milp.model import MilpModel, _build_pattern
+from twolevel.milp.model import MilpModel, build_pattern
 from twolevel.milp.solution import Capabilities, Solution, Status
 
 __all__ = ["CAPABILITIES", "FixedModeQP"]
@@ -90,7 +90,7 @@ class FixedModeQP:
         self._n_model_tri = self._src.size
         r_all = np.concatenate(out_r)
         c_all = np.concatenate(out_c)
-        self._pat = _build_pattern(r_all, c_all, (self._n_rows, self.cont.size))
+        self._pat = build_pattern(r_all, c_all, (self._n_rows, self.cont.size))
         self._bound_vals = np.concatenate([np.ones(self._vub.size), -np.ones(self._vlb.size)])
         self._row_of_tri = np.concatenate(out_r[:3])  # Clarabel row of each model triplet
         self._tri_cols = np.repeat(np.arange(n), np.diff(A.indptr))
@@ -108,7 +108,8 @@ class FixedModeQP:
 
     def disjunctive_rows(self) -> np.ndarray:
         """Bool per model row: every big-M and cover row of every disjunction — pass it as
-        ``disable`` (with any ``x_int``) for the lower bound of design.md's mode search."""
+        ``disable`` (with any ``x_int``) for the lower bound of the mode search
+        (:mod:`twolevel.milp.modes`)."""
         mask = np.zeros(self.model.n_rows, bool)
         for d in self.model.disjunctions:
             mask[d.cover_row] = True

@@ -1,9 +1,9 @@
-"""Model transforms: the L1 counterpart of a least-squares cost (for the exact HiGHS path).
+"""The L1 surrogate of a least-squares cost: the linear model HiGHS solves on the exact path.
 
 ``Σ_i w_i (F_i x − g_i)²`` becomes ``Σ_i √w_i · t_i`` with auxiliary ``t_i ≥ ±(F_i x − g_i)``:
 a MILP that HiGHS solves for the mode (the binaries); Clarabel then restores the exact quadratic
-cost with those binaries fixed (:class:`twolevel.milp.qp.FixedModeQP` on the *original* model,
-whose columns are the first ``n`` of the surrogate's).
+cost with those binaries fixed (:class:`twolevel.milp.clarabel.FixedModeQP` on the *original*
+model, whose columns are the first ``n`` of the surrogate's).
 """
 
 from __future__ import annotations
