@@ -12,7 +12,7 @@ from milp_systems import DT, H, T, double_integrator, random_formula
 from twolevel.milp.builder import ModelBuilder
 from twolevel.milp.encode import Requirement, encode
 from twolevel.milp.highs import solve_highs
-from twolevel.milp.modes import ModeSearch
+from twolevel.milp.modes import ModeSearch, ModeStatus
 from twolevel.milp.clarabel import FixedModeQP
 from twolevel.milp.solution import Status
 
@@ -47,7 +47,7 @@ def test_bnb_to_completion_matches_highs_on_linear_costs(seed: int) -> None:
         assert r.status == "infeasible" and r.certified
         return
     assert ref.status is Status.OPTIMAL
-    assert r.status == "optimal" and r.certified
+    assert r.status is ModeStatus.OPTIMAL and r.certified
     assert r.cost == pytest.approx(ref.objective, rel=1e-5, abs=1e-5)
     assert m.violation(r.x) < 1e-5
 
@@ -92,8 +92,19 @@ def test_adopted_readoff_is_that_modes_optimum() -> None:
         if ms.D == 0 or r.x is None or r.qps != 1:
             continue
         adopted += 1
-        ms._memo.clear()
+        ms.reset()
         c, _, _ = ms.solve_mode(r.mode)
         assert r.cost == pytest.approx(c, rel=1e-6, abs=1e-6)
         assert m.violation(r.x) <= 1e-6
     assert adopted >= 3  # 7 of these 120 seeds
+
+
+def test_statuses_read_as_the_strings_they_replace() -> None:
+    """Statuses are enums that print, serialise and look up as their values (the trace, run.json
+    and the plan's JSON write them)."""
+    import json
+
+    for st in (*ModeStatus, *Status):
+        assert st == st.value and f"{st}" == str(st) == st.value
+        assert json.dumps({st: st}) == json.dumps({st.value: st.value})
+        assert {st.value: 1}[st] == 1

@@ -106,6 +106,12 @@ class FixedModeQP:
         self._P_c: sp.csc_matrix | None = None
         self.setup_ms = 0.0
 
+    @property
+    def cost_couples_integers(self) -> bool:
+        """Whether the Hessian of the last solve couples integer and continuous columns (then the
+        continuous optimum depends on the mode, not only on the rows in force)."""
+        return self._Pf_ci is not None and bool(np.any(self._Pf_ci.data))
+
     def disjunctive_rows(self) -> np.ndarray:
         """Bool per model row: every big-M and cover row of every disjunction — pass it as
         ``disable`` (with any ``x_int``) for the lower bound of the mode search

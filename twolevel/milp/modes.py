@@ -1,12 +1,12 @@
-"""Real-time disjunctive mode search over one fixed-pattern Clarabel QP (design.md, steps a–d).
+"""Real-time disjunctive mode search over one fixed-pattern Clarabel QP.
 
 Every binary of a :class:`~twolevel.milp.model.MilpModel` belongs to one
 :class:`~twolevel.milp.model.Disjunction`. A *mode* picks one disjunct per disjunction: an int
 array ``choice`` (D,), ``-1`` meaning undecided (its cover row disabled, its big-M rows off). With
-the mode fixed the problem is the convex QP of :class:`~twolevel.milp.clarabel.FixedModeQP`; switching
-mode rewrites values only, on the same solver object.
+the mode fixed the problem is the convex QP of :class:`~twolevel.milp.clarabel.FixedModeQP`;
+switching mode rewrites values only, on the same solver object.
 
-:meth:`ModeSearch.run`:
+:meth:`ModeSearch.run` goes through these phases, each a method of the run's state (``_Run``):
 
 a. lower bound: the QP with every disjunction undecided;
 b. the mode read off its trajectory (per disjunction the disjunct whose rows hold best: the
@@ -19,8 +19,8 @@ d. best-first branch-and-bound over disjunctions within the remaining budget (no
    mode, bound = its QP cost, branch on the most violated undecided disjunction); exact within
    ``bnb_gap`` when run to completion (``budget_ms=None``);
 e. with whatever budget the branch-and-bound leaves (``bnb=False``, or a budget it did not use):
-   late seeds, then per-disjunction flips ordered by the dual values of the chosen disjuncts' rows, then one more
-   descent. (Measured on the closed-loop benchmark: run before the branch-and-bound under a QP
+   late seeds, then per-disjunction flips ordered by the dual values of the chosen disjuncts'
+   rows, then one more descent. (Measured on the closed-loop benchmark: run before the branch-and-bound under a QP
    cap, the flips spent the cap without finding the optimum the branch-and-bound then missed.)
 """
 
@@ -34,22 +34,29 @@ from typing import Sequence
 import numpy as np
 
 from twolevel.milp.clarabel import FixedModeQP
-from twolevel.milp.solution import Status
+from twolevel.milp.solution import Status, ValueEnum
 
-__all__ = ["ModeResult", "ModeSearch"]
+__all__ = ["ModeStatus", "ModeResult", "ModeSearch"]
 
 _FEAS = 1e-6  # [row units] a disjunct holds when its rows' slack is at least −_FEAS
 
 
+class ModeStatus(ValueEnum):
+    """Outcome of a mode search."""
+
+    OPTIMAL = "optimal"        # certified within the gap, or the branch-and-bound finished
+    FEASIBLE = "feasible"      # a mode found, not certified in time
+    INFEASIBLE = "infeasible"  # no mode can be feasible (proven)
+    TIME_LIMIT = "time_limit"  # no feasible mode found in time
+
+
 @dataclass(frozen=True)
 class ModeResult:
-    """Outcome of a mode search. ``status``: ``optimal`` (certified within the gap or B&B
-    finished), ``feasible`` (a mode found, not certified in time), ``infeasible`` (no mode can
-    be feasible: proven), ``time_limit`` (no feasible mode found in time). ``mode``: choice per
+    """Outcome of a mode search (``status``: see :class:`ModeStatus`). ``mode``: choice per
     disjunction (−1 inactive); ``bound``: the best proven lower bound; ``gap`` = (cost − bound) /
     max(|cost|, 1e-9); ``timings_ms``: phase → ms (lower_bound, readoff, seeds, flips, descent, bnb)."""
 
-    status: str
+    status: ModeStatus
     cost: float
     x: np.ndarray | None
     mode: np.ndarray
@@ -104,7 +111,14 @@ class ModeSearch:
         """Bool per global disjunct: its binary may be 1 (upper bound ≥ 1)."""
         return self.qp.model.ub[self.bin_col] >= 0.5
 
-    def _active(self, choice: np.ndarray) -> np.ndarray:
+    def reset(self) -> None:
+        """Forget the QPs solved so far (the memo of modes) and their count."""
+        self._memo.clear()
+        self.qps = 0
+
+    def active(self, choice: np.ndarray) -> np.ndarray:
+        """Bool per disjunction: it is in force under the (partial) mode ``choice`` (top-level
+        ones always; a nested one when its enclosing disjunct is chosen)."""
         act = self.parent < 0
         for d in self.nested:  # parents were created first
             p = self.parent[d]
@@ -116,7 +130,7 @@ class ModeSearch:
         """x_int (in ``qp.ints`` order) and the rows to disable for a (partial) mode."""
         m = self.qp.model
         x_int = np.zeros(self.qp.ints.size)
-        act = self._active(choice) if self.nested.size else np.ones(self.D, bool)
+        act = self.active(choice) if self.nested.size else np.ones(self.D, bool)
         dec = act & (choice >= 0)
         x_int[self.bin_pos[self.gstart[:-1][dec] + choice[dec]]] = 1.0
         disable = np.zeros(m.n_rows, bool)
@@ -172,14 +186,13 @@ class ModeSearch:
         self._memo[key] = out
         return out
 
-    def _adopt(self, choice: np.ndarray, x: np.ndarray, duals: np.ndarray | None, tol: float = _FEAS) -> bool:
+    def adopt(self, choice: np.ndarray, x: np.ndarray, duals: np.ndarray | None, tol: float = _FEAS) -> bool:
         """When ``x``, the optimum of a relaxation of ``choice``'s QP (fewer rows enforced),
         already satisfies that QP's rows and bounds (within ``tol``) with ``choice``'s binaries
         set, it is that QP's optimum too: memoise it instead of solving (saves the read-off QP
         whenever the lower bound's plan meets every rule). Not when the cost couples binaries
         and continuous columns (the continuous optimum would depend on the mode)."""
-        ci = self.qp._Pf_ci
-        if ci is not None and np.any(ci.data):
+        if self.qp.cost_couples_integers:
             return False
         x_int, _ = self.to_int(choice)
         xf = x.copy()
@@ -204,180 +217,251 @@ class ModeSearch:
         ``max_flip_qps``: at most that many QPs in the flips phase (the flips are tried in
         decreasing order of the dual weight of the chosen disjunct's rows). ``late_seed_points``:
         points read off only with the budget the branch-and-bound leaves (phase e)."""
-        t_start = time.perf_counter()
-        self._memo.clear()
-        self.qps = 0
-        tm: dict[str, float] = {}
-        deadline = None if budget_ms is None else t_start + budget_ms / 1e3
-        allowed = self.allowed()
-        D = self.D
-
-        qp_cap = [None]  # QPs allowed in total once the optional phases start
-
-        def out_of_time() -> bool:
-            if qp_cap[0] is not None and self.qps >= qp_cap[0]:
-                return True
-            return deadline is not None and time.perf_counter() > deadline
-
-        def lap(name: str, t0: float) -> float:
-            t1 = time.perf_counter()
-            tm[name] = tm.get(name, 0.0) + (t1 - t0) * 1e3
-            return t1
-
-        undecided = np.full(D, -1, np.int64)
-        lb, x_lb, z_lb = self.solve_mode(undecided)
-        t = lap("lower_bound", t_start)
-        if not np.isfinite(lb):
-            return ModeResult("infeasible", np.inf, None, undecided, np.zeros(self.qp.ints.size), self.qps,
-                              True, np.nan, np.inf, 0, tm)
-        best = [np.inf, None, undecided, None]  # cost, x, choice, duals
-
-        def consider(choice: np.ndarray) -> bool:
-            c, x, z = self.solve_mode(choice)
-            if c < best[0] - abs_tol:
-                best[:] = [c, x, choice.copy(), z]
-                return True
-            return False
-
-        def certified() -> bool:
-            return best[0] <= lb + gap * max(abs(best[0]), 0.0) + abs_tol
-
-        if D == 0:
-            best[:] = [lb, x_lb, undecided, None]
-        else:
-            ch = self.read_off(x_lb, allowed)
-            self._adopt(ch, x_lb, z_lb)
-            consider(ch)
-        t = lap("readoff", t)
-        if search_ms is not None:  # the optional phases get at most search_ms from here
-            cap = t + search_ms / 1e3
-            deadline = cap if deadline is None else min(deadline, cap)
-        if search_qps is not None:  # and at most search_qps QPs
-            qp_cap[0] = self.qps + search_qps
-        if D and not certified():
-            for ch in list(seeds) + [self.read_off(p, allowed) for p in seed_points]:
-                if out_of_time() or certified():
-                    break
-                ch = np.asarray(ch, np.int64)
-                if ch.shape == (D,) and np.all(allowed[self.gstart[:-1] + np.maximum(ch, 0)] | (ch < 0)):
-                    consider(np.maximum(ch, 0) if (ch < 0).any() else ch)
-            t = lap("seeds", t)
-            # descent: re-read the incumbent's own trajectory
-            for _ in range(3):
-                if best[1] is None or out_of_time() or certified():
-                    break
-                ch = self.read_off(best[1], allowed)
-                if np.array_equal(ch, best[2]) or not consider(ch):
-                    break
-            t = lap("descent", t)
-        cert = certified() if np.isfinite(best[0]) else False
-        nodes = 0
-        bound = lb
-        if D and bnb and not cert and not out_of_time():
-            finished, bound, nodes = self._bnb(lb, x_lb, best, allowed, bnb_gap, abs_tol, out_of_time)
-            cert = finished
-            t = lap("bnb", t)
+        self.reset()
+        run = _Run(self, budget_ms=budget_ms, gap=gap, abs_tol=abs_tol)
+        if not run.lower_bound():
+            return run.infeasible()
+        run.read_off()
+        run.cap(search_ms, search_qps)
+        if self.D and not run.certified():
+            run.seeds(seeds, seed_points)
+            run.descent()
+        cert = run.certified() if np.isfinite(run.best.cost) else False
+        if self.D and bnb and not cert and not run.out_of_time():
+            cert = run.branch_and_bound(bnb_gap)
         # the heuristic flips only with what the branch-and-bound leaves (it either finishes,
         # exact, or spends the cap: measured, it finds the optimum in fewer QPs than the flips)
-        if D and not cert and not certified() and not out_of_time():
-            for p in late_seed_points:
-                if out_of_time() or certified():
-                    break
-                consider(self.read_off(p, allowed))
-            t = lap("seeds", t)
-            # flips ordered by the duals of the chosen disjuncts' rows
-            improved = True
-            rounds = 0
-            q0 = self.qps
-            flips_left = (lambda: True) if max_flip_qps is None else (lambda: self.qps - q0 < max_flip_qps)
-            while improved and best[3] is not None and not certified() and not out_of_time() and rounds < 3 \
-                    and flips_left():
-                improved = False
-                rounds += 1
-                z = np.abs(best[3])
-                ch0 = best[2]
-                g_sel = self.gstart[:-1] + ch0
-                w = np.zeros(int(self.gstart[-1]))
-                np.add.at(w, self.row_g, z[self.row_flat])
-                weight = w[g_sel]
-                order = np.argsort(-weight)
-                for d in order[:max_flips]:
-                    if weight[d] <= 1e-9 or out_of_time() or not flips_left():
-                        break
-                    alts = [i for i in range(self.size[d]) if i != ch0[d] and allowed[self.gstart[d] + i]]
-                    for i in alts:
-                        if not flips_left() or out_of_time():
-                            break
-                        ch = ch0.copy()
-                        ch[d] = i
-                        if consider(ch):
-                            improved = True
-                    if improved:
-                        break
-            t = lap("flips", t)
-            if best[1] is not None and not out_of_time() and not certified():
-                ch = self.read_off(best[1], allowed)
-                if not np.array_equal(ch, best[2]):
-                    consider(ch)
-                t = lap("descent", t)
-            cert = certified()
-        if cert and np.isfinite(best[0]):
-            bound = max(bound, lb) if np.isfinite(bound) else lb
-        x_int, _ = self.to_int(best[2]) if best[1] is not None else (np.zeros(self.qp.ints.size), None)
-        if best[1] is None:
-            status = "infeasible" if cert else "time_limit"
-            return ModeResult(status, np.inf, None, best[2], x_int, self.qps, cert, np.nan, bound, nodes, tm)
-        g = max(0.0, (best[0] - bound) / max(abs(best[0]), 1e-9))
-        return ModeResult("optimal" if cert else "feasible", best[0], best[1], best[2], x_int, self.qps, cert,
-                          g, bound, nodes, tm)
+        if self.D and not cert and not run.certified() and not run.out_of_time():
+            run.late_seeds(late_seed_points)
+            run.flips(max_flips, max_flip_qps)
+            run.final_descent()
+            cert = run.certified()
+        return run.result(cert)
 
-    def _bnb(self, lb: float, x_lb: np.ndarray, best: list, allowed: np.ndarray, bnb_gap: float,
-             abs_tol: float, out_of_time) -> tuple[bool, float, int]:  # type: ignore[no-untyped-def]
-        """Best-first B&B; updates ``best`` in place. Returns (finished, lowest open bound, nodes)."""
-        D = self.D
-        heap: list[tuple[float, int, np.ndarray, np.ndarray]] = [(lb, 0, np.full(D, -1, np.int64), x_lb)]
+
+@dataclass
+class _Incumbent:
+    """The best mode found so far: its cost, point, choice per disjunction and row duals."""
+
+    cost: float
+    x: np.ndarray | None
+    choice: np.ndarray
+    duals: np.ndarray | None
+
+
+class _Run:
+    """One :meth:`ModeSearch.run`: the budget (deadline [s], QP cap), the lower bound, the
+    incumbent, the phase timings [ms]; each phase of the module docstring is a method."""
+
+    def __init__(self, search: ModeSearch, *, budget_ms: float | None, gap: float, abs_tol: float) -> None:
+        self.s = search
+        self.t = time.perf_counter()  # start of the current phase
+        self.deadline = None if budget_ms is None else self.t + budget_ms / 1e3
+        self.qp_cap: int | None = None  # QPs allowed in total once the optional phases start
+        self.gap, self.abs_tol = gap, abs_tol
+        self.tm: dict[str, float] = {}
+        self.allowed = search.allowed()
+        self.undecided = np.full(search.D, -1, np.int64)
+        self.lb, self.x_lb, self.z_lb = np.inf, None, None
+        self.best = _Incumbent(np.inf, None, self.undecided, None)
+        self.bound = np.inf
+        self.nodes = 0
+
+    # ------------------------------------------------------------------ bookkeeping
+    def out_of_time(self) -> bool:
+        if self.qp_cap is not None and self.s.qps >= self.qp_cap:
+            return True
+        return self.deadline is not None and time.perf_counter() > self.deadline
+
+    def lap(self, phase: str) -> None:
+        """Close the current phase: add its time to ``phase``."""
+        t1 = time.perf_counter()
+        self.tm[phase] = self.tm.get(phase, 0.0) + (t1 - self.t) * 1e3
+        self.t = t1
+
+    def consider(self, choice: np.ndarray) -> bool:
+        """Solve ``choice``; keep it when it beats the incumbent by more than ``abs_tol``."""
+        c, x, z = self.s.solve_mode(choice)
+        if c < self.best.cost - self.abs_tol:
+            self.best = _Incumbent(c, x, choice.copy(), z)
+            return True
+        return False
+
+    def certified(self) -> bool:
+        """The incumbent is within ``gap`` of the lower bound."""
+        return self.best.cost <= self.lb + self.gap * max(abs(self.best.cost), 0.0) + self.abs_tol
+
+    def cap(self, search_ms: float | None, search_qps: int | None) -> None:
+        """Cap the optional phases, from now on, at ``search_ms`` [ms] and ``search_qps`` QPs."""
+        if search_ms is not None:
+            cap = self.t + search_ms / 1e3
+            self.deadline = cap if self.deadline is None else min(self.deadline, cap)
+        if search_qps is not None:
+            self.qp_cap = self.s.qps + search_qps
+
+    # ------------------------------------------------------------------ phases
+    def lower_bound(self) -> bool:
+        """a. The QP with every disjunction undecided; False when even that is infeasible."""
+        self.lb, self.x_lb, self.z_lb = self.s.solve_mode(self.undecided)
+        self.bound = self.lb
+        self.lap("lower_bound")
+        return bool(np.isfinite(self.lb))
+
+    def read_off(self) -> None:
+        """b. The mode read off the lower bound's point (adopted without a QP when it holds)."""
+        if self.s.D == 0:
+            self.best = _Incumbent(self.lb, self.x_lb, self.undecided, None)
+        else:
+            ch = self.s.read_off(self.x_lb, self.allowed)
+            self.s.adopt(ch, self.x_lb, self.z_lb)
+            self.consider(ch)
+        self.lap("readoff")
+
+    def seeds(self, seeds: Sequence[np.ndarray], points: Sequence[np.ndarray]) -> None:
+        """c. The caller's choices and the modes read off its points."""
+        D, allowed, gstart = self.s.D, self.allowed, self.s.gstart
+        for ch in list(seeds) + [self.s.read_off(p, allowed) for p in points]:
+            if self.out_of_time() or self.certified():
+                break
+            ch = np.asarray(ch, np.int64)
+            if ch.shape == (D,) and np.all(allowed[gstart[:-1] + np.maximum(ch, 0)] | (ch < 0)):
+                self.consider(np.maximum(ch, 0) if (ch < 0).any() else ch)
+        self.lap("seeds")
+
+    def descent(self, rounds: int = 3) -> None:
+        """c. Re-read the mode off the incumbent's own point while that improves it."""
+        for _ in range(rounds):
+            if self.best.x is None or self.out_of_time() or self.certified():
+                break
+            ch = self.s.read_off(self.best.x, self.allowed)
+            if np.array_equal(ch, self.best.choice) or not self.consider(ch):
+                break
+        self.lap("descent")
+
+    def branch_and_bound(self, bnb_gap: float) -> bool:
+        """d. Best-first branch-and-bound over the disjunctions (node = partial mode, bound =
+        its QP cost, branch on the most violated open disjunction); True when it finished."""
+        s, D, allowed = self.s, self.s.D, self.allowed
+        heap: list[tuple[float, int, np.ndarray, np.ndarray]] = [(self.lb, 0, self.undecided.copy(), self.x_lb)]
         counter = 1
-        nodes = 0
-
-        def prune_at() -> float:
-            if not np.isfinite(best[0]):
-                return np.inf
-            return best[0] - max(bnb_gap * abs(best[0]), abs_tol)
-
+        finished = True
         while heap:
-            if out_of_time():
-                return False, min(heap[0][0], best[0]), nodes
+            if self.out_of_time():
+                finished = False
+                self.bound = min(heap[0][0], self.best.cost)
+                break
             bnd, _, ch, x = heapq.heappop(heap)
-            if bnd >= prune_at():
+            if bnd >= self._prune_at(bnb_gap):
                 continue
-            nodes += 1
-            act = self._active(ch) if self.nested.size else np.ones(D, bool)
+            self.nodes += 1
+            act = s.active(ch) if s.nested.size else np.ones(D, bool)
             open_d = np.flatnonzero(act & (ch < 0))
-            val = np.where(allowed, self.values(x), -np.inf)
+            val = np.where(allowed, s.values(x), -np.inf)
             seg_best = np.full(D, -np.inf)
-            np.maximum.at(seg_best, self.owner, val)
+            np.maximum.at(seg_best, s.owner, val)
             viol = seg_best[open_d]
             if open_d.size == 0 or np.all(viol >= -_FEAS):
                 # the relaxation's point already satisfies every open disjunction: a full mode
                 full = ch.copy()
                 if open_d.size:
-                    full[open_d] = self.read_off(x, allowed)[open_d]
+                    full[open_d] = s.read_off(x, allowed)[open_d]
                 full[(~act) & (full < 0)] = 0
-                if bnd < best[0] - abs_tol:
-                    c, xf, z = self.solve_mode(full)
-                    if c < best[0]:
-                        best[:] = [c, xf, full, z]
+                if bnd < self.best.cost - self.abs_tol:
+                    c, xf, z = s.solve_mode(full)
+                    if c < self.best.cost:
+                        self.best = _Incumbent(c, xf, full, z)
                 continue
             d = int(open_d[np.argmin(viol)])
-            for i in range(self.size[d]):
-                if not allowed[self.gstart[d] + i]:
+            for i in range(s.size[d]):
+                if not allowed[s.gstart[d] + i]:
                     continue
                 child = ch.copy()
                 child[d] = i
-                c, xc, _ = self.solve_mode(child)
-                if c < prune_at():
+                c, xc, _ = s.solve_mode(child)
+                if c < self._prune_at(bnb_gap):
                     heapq.heappush(heap, (c, counter, child, xc))
                     counter += 1
-                if out_of_time():
+                if self.out_of_time():
                     break
-        return True, best[0], nodes
+        if finished:
+            self.bound = self.best.cost
+        self.lap("bnb")
+        return finished
+
+    def _prune_at(self, bnb_gap: float) -> float:
+        if not np.isfinite(self.best.cost):
+            return np.inf
+        return self.best.cost - max(bnb_gap * abs(self.best.cost), self.abs_tol)
+
+    def late_seeds(self, points: Sequence[np.ndarray]) -> None:
+        """e. The modes read off points kept for the budget the branch-and-bound leaves."""
+        for p in points:
+            if self.out_of_time() or self.certified():
+                break
+            self.consider(self.s.read_off(p, self.allowed))
+        self.lap("seeds")
+
+    def flips(self, max_flips: int, max_flip_qps: int | None) -> None:
+        """e. Flip single disjunctions, in decreasing order of the dual weight of the chosen
+        disjuncts' rows, for at most three improving rounds and ``max_flip_qps`` QPs."""
+        s, allowed = self.s, self.allowed
+        q0 = s.qps
+
+        def flips_left() -> bool:
+            return max_flip_qps is None or s.qps - q0 < max_flip_qps
+
+        improved = True
+        rounds = 0
+        while improved and self.best.duals is not None and not self.certified() and not self.out_of_time() \
+                and rounds < 3 and flips_left():
+            improved = False
+            rounds += 1
+            z = np.abs(self.best.duals)
+            ch0 = self.best.choice
+            g_sel = s.gstart[:-1] + ch0
+            w = np.zeros(int(s.gstart[-1]))
+            np.add.at(w, s.row_g, z[s.row_flat])
+            weight = w[g_sel]
+            order = np.argsort(-weight)
+            for d in order[:max_flips]:
+                if weight[d] <= 1e-9 or self.out_of_time() or not flips_left():
+                    break
+                alts = [i for i in range(s.size[d]) if i != ch0[d] and allowed[s.gstart[d] + i]]
+                for i in alts:
+                    if not flips_left() or self.out_of_time():
+                        break
+                    ch = ch0.copy()
+                    ch[d] = i
+                    if self.consider(ch):
+                        improved = True
+                if improved:
+                    break
+        self.lap("flips")
+
+    def final_descent(self) -> None:
+        """e. One more read-off of the incumbent's point."""
+        if self.best.x is not None and not self.out_of_time() and not self.certified():
+            ch = self.s.read_off(self.best.x, self.allowed)
+            if not np.array_equal(ch, self.best.choice):
+                self.consider(ch)
+            self.lap("descent")
+
+    # ------------------------------------------------------------------ outcome
+    def infeasible(self) -> ModeResult:
+        """The lower bound is infeasible: so is every mode (proven)."""
+        return ModeResult(ModeStatus.INFEASIBLE, np.inf, None, self.undecided, np.zeros(self.s.qp.ints.size),
+                          self.s.qps, True, np.nan, np.inf, 0, self.tm)
+
+    def result(self, cert: bool) -> ModeResult:
+        best = self.best
+        bound = self.bound
+        if cert and np.isfinite(best.cost):
+            bound = max(bound, self.lb) if np.isfinite(bound) else self.lb
+        x_int = self.s.to_int(best.choice)[0] if best.x is not None else np.zeros(self.s.qp.ints.size)
+        if best.x is None:
+            status = ModeStatus.INFEASIBLE if cert else ModeStatus.TIME_LIMIT
+            return ModeResult(status, np.inf, None, best.choice, x_int, self.s.qps, cert, np.nan, bound,
+                              self.nodes, self.tm)
+        g = max(0.0, (best.cost - bound) / max(abs(best.cost), 1e-9))
+        return ModeResult(ModeStatus.OPTIMAL if cert else ModeStatus.FEASIBLE, best.cost, best.x, best.choice,
+                          x_int, self.s.qps, cert, g, bound, self.nodes, self.tm)
