@@ -9,7 +9,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from twolevel.milp.builder import ModelBuilder
-from twolevel.milp.encode import AffineSignal, Requirement, collision_free_builtin, encode, reachable_box
+from twolevel.compiler.driver import AffineSignal, Requirement, collision_free_builtin, encode, reachable_box
 from twolevel.milp.highs import solve_highs
 from twolevel.milp.model import PatternCache
 from twolevel.milp.clarabel import FixedModeQP

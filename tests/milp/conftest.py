@@ -1,4 +1,5 @@
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).parent))
+# the double integrator and random formulas of tests/compiler/milp_systems.py
+sys.path.insert(0, str(Path(__file__).parents[1] / "compiler"))

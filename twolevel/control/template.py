@@ -30,10 +30,10 @@ import numpy as np
 from twolevel.control.horizon import StepData
 from twolevel.control.problem import (Assembled, Weights, dynamics_values, guard_values, input_bounds, others_of,
                                       set_cost, trace_signals)
-from twolevel.milp.affine_block import AffineBlock
-from twolevel.milp.collision import CollisionBlock, collision_free_builtin
-from twolevel.milp.encode import AffineSignal, Emission, Encoder, Requirement
-from twolevel.milp.robtree import Block, Op
+from twolevel.compiler.affine_block import AffineBlock
+from twolevel.compiler.collision import CollisionBlock, collision_free_builtin
+from twolevel.compiler.driver import AffineSignal, Emission, Encoder, Requirement
+from twolevel.compiler.tree import Block, Op
 from twolevel.models.params import BicycleParams
 
 __all__ = ["StepTemplate", "TemplateCache", "template_of", "refresh", "signal_kinds"]

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from twolevel.milp.builder import ModelBuilder
-from twolevel.milp.encode import (AffineSignal, Requirement, collision_free_builtin, encode,
+from twolevel.compiler.driver import (AffineSignal, Requirement, collision_free_builtin, encode,
                                   reachable_box)
 from twolevel.milp.highs import solve_highs
 from twolevel.milp.solution import Status

@@ -1,6 +1,6 @@
 """Robustness trees → rows of the model: min as rows, max as disjunctions with big-M from bounds.
 
-The emission half of :class:`twolevel.milp.encoder.Encoder` (a mixin over its state): new
+The emission half of :class:`twolevel.compiler.encoder.Encoder` (a mixin over its state): new
 variables, guarded rows, vectorised blocks, disjunctions, requiring a tree above a margin, and
 the final flush of every emitted row into the builder's ``stl`` block.
 """
@@ -12,9 +12,9 @@ from typing import Sequence
 
 import numpy as np
 
-from twolevel.milp.encoding import MIL502, AffineSignal, EncodeError, Signal, _NOWHERE, _has_block
+from twolevel.compiler.types import MIL502, AffineSignal, EncodeError, Signal, _NOWHERE, _has_block
 from twolevel.milp.model import Disjunction
-from twolevel.milp.robtree import INF, Block, Lin, Op, Tree, bounds, negate
+from twolevel.compiler.tree import INF, Block, Lin, Op, Tree, bounds, negate
 
 __all__ = ["RowEmitter"]
 

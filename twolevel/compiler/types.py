@@ -1,6 +1,6 @@
 """The encoder's data: signals with two faces, requirements, what an encoding added, its codes.
 
-See :mod:`twolevel.milp.encode` for the meaning; these types are re-exported there.
+See :mod:`twolevel.compiler.driver` for the meaning; these types are re-exported there.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from twolevel.diagnostics import Code, Diagnostic, Severity, Span
-from twolevel.milp.robtree import Block, Op, Tree, scale
+from twolevel.compiler.tree import Block, Op, Tree, scale
 from twolevel.stl import ast
 
 __all__ = ["AffineSignal", "Signal", "Builtin", "Requirement", "Encoding", "Emission", "EncodeError",

@@ -3,7 +3,7 @@
 ``always[0:1] (v <= v_max + tol)`` at one step is the ``min`` over the window of affine
 expressions of the decision variables: one dense row per (predicate, step) over the signals'
 columns, built with array arithmetic instead of one tree leaf per step. :class:`AffineBlock` is a
-:class:`~twolevel.milp.robtree.Block`: rows always true are dropped and rows false by constants
+:class:`~twolevel.compiler.tree.Block`: rows always true are dropped and rows false by constants
 fail the requirement exactly as the generic path does; under a guard each row gets its big-M
 from the variable bounds. Anything else (other operators, non-linear terms, negation) returns
 ``None`` and the generic encoder takes over.
@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from twolevel.milp.robtree import Block, Tree, lin, mk
+from twolevel.compiler.tree import Block, Tree, lin, mk
 from twolevel.stl import ast
 
 __all__ = ["AffineBlock", "vector_always"]
@@ -68,7 +68,7 @@ class AffineBlock(Block):
 
     def emit(self, enc, margin: float, guard: int) -> None:  # type: ignore[no-untyped-def]
         if enc.stable and guard < 0:
-            from twolevel.milp.encode import Emission
+            from twolevel.compiler.driver import Emission
 
             out = self.layout(enc.b.lb, enc.b.ub, margin)
             if out is None:

@@ -12,8 +12,8 @@ import math
 
 import numpy as np
 
-from twolevel.milp.encode import MIL501, MIL504, Builtin, EncodeError, Encoder, _span
-from twolevel.milp.robtree import INF, Block, Lin, Op, Tree, add, lin, mk, scale
+from twolevel.compiler.driver import MIL501, MIL504, Builtin, EncodeError, Encoder, _span
+from twolevel.compiler.tree import INF, Block, Lin, Op, Tree, add, lin, mk, scale
 from twolevel.stl import ast
 
 __all__ = ["collision_free_builtin", "reachable_box", "CollisionBlock"]
@@ -285,7 +285,7 @@ class CollisionBlock(Block):
 
     @staticmethod
     def _emit_stable(enc: Encoder, lay: "StableLayout") -> None:
-        from twolevel.milp.encode import Emission
+        from twolevel.compiler.driver import Emission
 
         n, nb = lay.n, 4 * lay.n  # n = 0 still records an (empty) emission: the structure
         blk = enc.b.add_vars("cf", nb, 0.0, 1.0, integer=True)

@@ -5,7 +5,7 @@ solve time, including every past sample) or an affine expression of the decision
 :class:`AffineSignal` holds the latter as a sparse matrix (one row per step) plus an offset; a
 plain array holds the former.
 
-A formula at step ``t`` is first evaluated into a robustness tree (:mod:`twolevel.milp.robtree`):
+A formula at step ``t`` is first evaluated into a robustness tree (:mod:`twolevel.compiler.tree`):
 min/max over affine leaves, with every constant folded, so an inactive rule or a trivially true
 disjunct vanishes before a variable is created. Then the tree is *required*:
 
@@ -27,9 +27,9 @@ Semantics are those of the offline monitor (RTAMT's discrete-time offline semant
 truncated at the ends of the trace, empty ``always``/``historically`` windows +inf, empty
 ``eventually``/``once`` windows −inf, ``next`` past the end and ``prev`` before the start +inf.
 
-The code lives in: :mod:`twolevel.milp.encoding` (types and codes), :mod:`twolevel.milp.encoder`
-(the :class:`Encoder` object), :mod:`twolevel.milp.evaluate` (formulas → trees),
-:mod:`twolevel.milp.emit` (trees → rows); this module is the entry :func:`encode` with rule
+The code lives in: :mod:`twolevel.compiler.types` (types and codes), :mod:`twolevel.compiler.encoder`
+(the :class:`Encoder` object), :mod:`twolevel.compiler.evaluator` (formulas → trees),
+:mod:`twolevel.compiler.emitter` (trees → rows); this module is the entry :func:`encode` with rule
 recovery, and re-exports the public names.
 """
 
@@ -41,10 +41,10 @@ from typing import Iterable, Literal, Mapping
 import numpy as np
 
 from twolevel.milp.builder import ModelBuilder
-from twolevel.milp.encoder import Encoder
-from twolevel.milp.encoding import (MIL501, MIL502, MIL503, MIL504, AffineSignal, Builtin, Emission,  # noqa: F401
+from twolevel.compiler.encoder import Encoder
+from twolevel.compiler.types import (MIL501, MIL502, MIL503, MIL504, AffineSignal, Builtin, Emission,  # noqa: F401
                                     EncodeError, Encoding, Requirement, Signal, _NOWHERE, _span)
-from twolevel.milp.robtree import INF, Lin, Op, Tree, bounds, mk
+from twolevel.compiler.tree import INF, Lin, Op, Tree, bounds, mk
 from twolevel.stl import ast
 
 __all__ = [
@@ -175,7 +175,7 @@ def _recover(enc: Encoder, trees: list[tuple[str, int, Tree]], reqs: list[Requir
 # (in their own module; re-exported here for existing callers)
 def __getattr__(name: str) -> object:
     if name in ("collision_free_builtin", "reachable_box"):
-        from twolevel.milp import collision
+        from twolevel.compiler import collision
 
         return getattr(collision, name)
     raise AttributeError(name)

@@ -1,16 +1,16 @@
-"""Formulas → robustness trees (:mod:`twolevel.milp.robtree`) over the trace, constants folded.
+"""Formulas → robustness trees (:mod:`twolevel.compiler.tree`) over the trace, constants folded.
 
-The evaluation half of :class:`twolevel.milp.encoder.Encoder` (a mixin over its state): signals
+The evaluation half of :class:`twolevel.compiler.encoder.Encoder` (a mixin over its state): signals
 at a step, arithmetic terms, every operator of the language with the offline monitor's
-semantics (see :mod:`twolevel.milp.encode`).
+semantics (see :mod:`twolevel.compiler.driver`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from twolevel.milp.encoding import MIL501, MIL504, AffineSignal, EncodeError, _span
-from twolevel.milp.robtree import INF, Op, Tree, add, lin, mk, negate, scale
+from twolevel.compiler.types import MIL501, MIL504, AffineSignal, EncodeError, _span
+from twolevel.compiler.tree import INF, Op, Tree, add, lin, mk, negate, scale
 from twolevel.stl import ast
 
 __all__ = ["TreeEvaluator"]
@@ -146,7 +146,7 @@ class TreeEvaluator:
             past = op in ("historically", "once")
             w = self._window(t, n.interval, past)
             if op == "always" and s > 0:
-                from twolevel.milp.affine_block import vector_always
+                from twolevel.compiler.affine_block import vector_always
 
                 fast = vector_always(self, n, w)
                 if fast is not None:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from twolevel.milp.builder import ModelBuilder
-from twolevel.milp.encode import Requirement, encode
+from twolevel.compiler.driver import Requirement, encode
 from twolevel.milp.highs import solve_highs
 from twolevel.milp.solution import Status
 from twolevel.monitor.robustness import robustness

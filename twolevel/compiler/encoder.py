@@ -1,6 +1,6 @@
-"""The encoder object: one trace's signals, builder and memo tables (design in :mod:`twolevel.milp.encode`).
+"""The encoder object: one trace's signals, builder and memo tables (design in :mod:`twolevel.compiler.driver`).
 
-Evaluation (:mod:`twolevel.milp.evaluate`) and emission (:mod:`twolevel.milp.emit`) are mixins
+Evaluation (:mod:`twolevel.compiler.evaluator`) and emission (:mod:`twolevel.compiler.emitter`) are mixins
 over the state set up here.
 """
 
@@ -12,10 +12,10 @@ import numpy as np
 
 from twolevel.diagnostics import Diagnostic
 from twolevel.milp.builder import ModelBuilder
-from twolevel.milp.emit import RowEmitter
-from twolevel.milp.encoding import AffineSignal, Builtin, Emission, Signal
-from twolevel.milp.evaluate import TreeEvaluator
-from twolevel.milp.robtree import Tree
+from twolevel.compiler.emitter import RowEmitter
+from twolevel.compiler.types import AffineSignal, Builtin, Emission, Signal
+from twolevel.compiler.evaluator import TreeEvaluator
+from twolevel.compiler.tree import Tree
 from twolevel.stl import ast
 
 __all__ = ["Encoder"]

@@ -1,0 +1,1 @@
+"""The STL → MILC compiler (stages described in :mod:`twolevel.compiler.driver`)."""
