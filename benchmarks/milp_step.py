@@ -9,7 +9,10 @@ import numpy as np
 import scipy.sparse as sp
 
 from twolevel.milp.builder import ModelBuilder
-from twolevel.compiler.driver import AffineSignal, Requirement, collision_free_builtin, encode, reachable_box
+from twolevel.compiler.collision import collision_free_builtin, reachable_box
+from twolevel.compiler.driver import encode
+from twolevel.compiler.signals import AffineSignal
+from twolevel.compiler.types import Requirement
 from twolevel.milp.highs import solve_highs
 from twolevel.milp.model import PatternCache
 from twolevel.milp.clarabel import FixedModeQP

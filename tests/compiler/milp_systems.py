@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from twolevel.milp.builder import ModelBuilder
-from twolevel.compiler.driver import AffineSignal
+from twolevel.compiler.signals import AffineSignal
 from twolevel.stl import ast
 
 DT = 0.1

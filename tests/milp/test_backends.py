@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from twolevel.milp.builder import ModelBuilder
-from twolevel.compiler.driver import Requirement, encode
+from twolevel.compiler.driver import encode
+from twolevel.compiler.types import Requirement
 from twolevel.milp.highs import CAPABILITIES as HIGHS, solve_highs, write_model
 from twolevel.milp.model import PatternCache
 from twolevel.milp.clarabel import CAPABILITIES as CLARABEL, FixedModeQP

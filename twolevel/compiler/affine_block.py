@@ -1,19 +1,21 @@
-"""A vectorised fast path of the encoder: ``always[a,b]`` over a conjunction of linear predicates.
+"""The affine block: ``always[a,b]`` over a conjunction of linear predicates, vectorised.
 
 ``always[0:1] (v <= v_max + tol)`` at one step is the ``min`` over the window of affine
 expressions of the decision variables: one dense row per (predicate, step) over the signals'
 columns, built with array arithmetic instead of one tree leaf per step. :class:`AffineBlock` is a
-:class:`~twolevel.compiler.tree.Block`: rows always true are dropped and rows false by constants
+:class:`~twolevel.compiler.block.Block`: rows always true are dropped and rows false by constants
 fail the requirement exactly as the generic path does; under a guard each row gets its big-M
-from the variable bounds. Anything else (other operators, non-linear terms, negation) returns
-``None`` and the generic encoder takes over.
+from the variable bounds. :func:`vector_always` is stage 1's fast path: anything else (other
+operators, non-linear terms, negation) returns ``None`` and the generic evaluation takes over.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from twolevel.compiler.tree import Block, Tree, lin, mk
+from twolevel.compiler.block import Block, RowSink
+from twolevel.compiler.signals import TraceSignals
+from twolevel.compiler.tree import Tree, lin, mk
 from twolevel.stl import ast
 
 __all__ = ["AffineBlock", "vector_always"]
@@ -24,6 +26,7 @@ class AffineBlock(Block):
     shape, bool) is the structural pattern (an entry may be structurally present and zero now)."""
 
     __slots__ = ("C", "off", "S")
+    kind = "affine"
 
     def __init__(self, C: np.ndarray, off: np.ndarray, S: np.ndarray | None = None) -> None:
         self.C, self.off = C, off
@@ -66,23 +69,20 @@ class AffineBlock(Block):
         r, c = np.nonzero(self.S)
         return r, c, self.C[r, c], margin - self.off
 
-    def emit(self, enc, margin: float, guard: int) -> None:  # type: ignore[no-untyped-def]
-        if enc.stable and guard < 0:
-            from twolevel.compiler.driver import Emission
-
-            out = self.layout(enc.b.lb, enc.b.ub, margin)
+    def emit(self, sink: RowSink, margin: float, guard: int) -> None:
+        if sink.stable and guard < 0:
+            out = self.layout(sink.lb, sink.ub, margin)
             if out is None:
-                enc._fail(guard)
+                sink.fail(guard)
                 return
             r, c, vals, rhs = out
-            t0, r0 = enc.n_triplets(), enc._n
-            enc.emit_triplets(self.C.shape[0], r, c, vals, rhs)
-            enc.emissions.append(Emission("affine", slice(t0, t0 + r.size), slice(r0, enc._n),
-                                          np.zeros(0, np.int64), (self.S,)))
+            since = sink.mark()
+            sink.emit_triplets(self.C.shape[0], r, c, vals, rhs)
+            sink.record(self.kind, since, np.zeros(0, np.int64), (self.S,))
             return
-        lo, hi = self._range(enc.b.lb, enc.b.ub)
+        lo, hi = self._range(sink.lb, sink.ub)
         if np.any(hi < margin):
-            enc._fail(guard)
+            sink.fail(guard)
         live = (lo < margin) & (hi >= margin)
         if not live.any():
             return
@@ -97,47 +97,32 @@ class AffineBlock(Block):
             c = np.concatenate([c, np.full(k, guard)])
             vals = np.concatenate([vals, -M])
             rhs = rhs - M
-        rows = enc.emit_triplets(C.shape[0], r, c, vals, rhs)
-        if guard >= 0:
-            enc._rows_of_guard.setdefault(guard, []).extend(rows.tolist())
-
-
-def _pattern(enc, name: str, n: int) -> np.ndarray:  # type: ignore[no-untyped-def]
-    """The structural pattern (T, n) of signal ``name``'s coefficients (cached on the encoder)."""
-    key = "\0S" + name
-    hit = enc._dense.get(key)
-    if hit is None:
-        s = enc.signals.get(name)
-        S = np.zeros((enc.T, n), bool)
-        if hasattr(s, "coef"):
-            rows = np.repeat(np.arange(enc.T), np.diff(s.coef.indptr))
-            S[rows, np.asarray(s.coef.indices)] = True
-        hit = enc._dense[key] = (S, None)
-    return hit[0]
+        sink.emit_triplets(C.shape[0], r, c, vals, rhs, guard)
 
 
 Term = tuple[np.ndarray, np.ndarray, np.ndarray]
 
 
-def _term(enc, node: ast.Node, steps: np.ndarray, n: int) -> Term | None:  # type: ignore[no-untyped-def]
+def _term(sig: TraceSignals, node: ast.Node, steps: np.ndarray, n: int) -> Term | None:
     """A term over ``steps``: (C (K, n), off (K,), structural pattern S (K, n)), or None when
     not affine with known factors."""
     K = steps.size
     if isinstance(node, ast.Num):
         return np.zeros((K, n)), np.full(K, float(node.value)), np.zeros((K, n), bool)
     if isinstance(node, ast.Var):
-        if node.name in enc.consts and node.name not in enc.signals:
-            return np.zeros((K, n)), np.full(K, float(enc.consts[node.name])), np.zeros((K, n), bool)
-        dense = enc.dense_signal(node.name, n)
+        c = sig.const(node.name)
+        if c is not None:
+            return np.zeros((K, n)), np.full(K, c), np.zeros((K, n), bool)
+        dense = sig.dense(node.name, n)
         if dense is None:
             return None
         C, off = dense
-        return C[steps], off[steps], _pattern(enc, node.name, n)[steps]
+        return C[steps], off[steps], sig.pattern(node.name, n)[steps]
     if isinstance(node, ast.Neg):
-        a = _term(enc, node.operand, steps, n)
+        a = _term(sig, node.operand, steps, n)
         return None if a is None else (-a[0], -a[1], a[2])
     if isinstance(node, ast.Arith):
-        a, b = _term(enc, node.left, steps, n), _term(enc, node.right, steps, n)
+        a, b = _term(sig, node.left, steps, n), _term(sig, node.right, steps, n)
         if a is None or b is None:
             return None
         if node.op == "+":
@@ -165,19 +150,21 @@ def _conjuncts(node: ast.Node, out: list[ast.Compare]) -> bool:
     return False
 
 
-def vector_always(enc, node: ast.Temporal, steps: range) -> Tree | None:  # type: ignore[no-untyped-def]
+def vector_always(sig: TraceSignals, node: ast.Temporal, steps: range, stable: bool = False) -> Tree | None:
     """The robustness tree of ``always`` over ``steps`` of a conjunction of linear predicates,
-    as an :class:`AffineBlock` (constants folded first); None when the fast path does not apply."""
+    as an :class:`AffineBlock` (constants folded first); None when the fast path does not apply.
+    ``stable``: a row is constant only when it has no structural entry (see
+    :class:`~twolevel.compiler.types.Emission`)."""
     preds: list[ast.Compare] = []
     if not _conjuncts(node.operand, preds) or len(steps) == 0:
         return None
-    n = enc.dense_width()
+    n = sig.dense_width()
     if n is None:
         return None
     st = np.arange(steps.start, steps.stop)
     Cs, offs, Ss = [], [], []
     for p in preds:
-        l, r = _term(enc, p.left, st, n), _term(enc, p.right, st, n)
+        l, r = _term(sig, p.left, st, n), _term(sig, p.right, st, n)
         if l is None or r is None:
             return None
         if p.op in ("<", "<="):
@@ -189,7 +176,7 @@ def vector_always(enc, node: ast.Temporal, steps: range) -> Tree | None:  # type
     if not np.all(np.isfinite(C)):
         return None
     # stable: a row is constant only when it has no structural entry (not when its values are 0)
-    const = ~S.any(axis=1) if enc.stable else ~C.any(axis=1)
+    const = ~S.any(axis=1) if stable else ~C.any(axis=1)
     with np.errstate(invalid="ignore"):
         c_min = float(np.min(off[const])) if const.any() else np.inf
     if np.isnan(c_min):
@@ -199,5 +186,5 @@ def vector_always(enc, node: ast.Temporal, steps: range) -> Tree | None:  # type
         return -np.inf
     if not keep.any():
         return c_min
-    blk = AffineBlock(C[keep], off[keep], S[keep] if enc.stable else None)
+    blk = AffineBlock(C[keep], off[keep], S[keep] if stable else None)
     return mk(False, [blk, c_min]) if np.isfinite(c_min) else blk

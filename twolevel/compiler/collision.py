@@ -1,19 +1,26 @@
-"""The built-in world predicate ``collision_free(d)`` at the high level, and reachable boxes.
+"""The built-in world predicate ``collision_free(d)`` at the high level, its block, and reachable boxes.
 
 ``collision_free(d)`` is ``|x − x_i| + |y − y_i| ≥ d`` for every nearby vehicle i (a 1-norm
 diamond around its constant-velocity prediction). Vehicle–step pairs whose least 1-norm distance
 from the ego's position box is at least d, and faces that can never hold, are removed exactly by
-the encoder's interval pruning, given the ego's position bounds (reachable boxes).
+the compiler's interval pruning, given the ego's position bounds (reachable boxes). Where the
+ego's position is one column per coordinate, the pairs of a trace are one
+:class:`CollisionBlock` (a :class:`~twolevel.compiler.block.Block`), emitted by a few array
+operations.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
-from twolevel.compiler.driver import MIL501, MIL504, Builtin, EncodeError, Encoder, _span
-from twolevel.compiler.tree import INF, Block, Lin, Op, Tree, add, lin, mk, scale
+from twolevel.compiler.block import Block, RowSink
+from twolevel.compiler.codes import MIL501, MIL504, EncodeError, span_of
+from twolevel.compiler.signals import TraceSignals
+from twolevel.compiler.tree import INF, Lin, Op, Tree, add, lin, mk, scale
+from twolevel.compiler.types import Builtin, BuiltinContext
 from twolevel.stl import ast
 
 __all__ = ["collision_free_builtin", "reachable_box", "CollisionBlock"]
@@ -28,7 +35,7 @@ def collision_free_builtin(x: str, y: str, others: np.ndarray, *, ids: np.ndarra
     where absent). Pairs that cannot come within reach and faces that can never hold are
     removed by the encoder's interval pruning, exactly, given the ego's position bounds.
 
-    Stable encoding (``Encoder.stable``): each kept pair is a disjunction of all four faces
+    Stable encoding (the compiler's ``stable`` mode): each kept pair is a disjunction of all four faces
     (faces that can never hold have their binary's upper bound set to 0), and the kept pairs are
     those that can come within ``d + pad`` [m] (``pad`` ≥ 0: a margin so that the same structure
     serves the next steps), or, when ``keep`` is given, the pairs whose code is in ``keep`` plus
@@ -38,32 +45,32 @@ def collision_free_builtin(x: str, y: str, others: np.ndarray, *, ids: np.ndarra
     vid = np.arange(others.shape[0], dtype=np.int64) if ids is None else np.asarray(ids, np.int64)
     opts = (float(pad), None if keep is None else np.asarray(keep, np.int64))
     faces = ((1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0))
-    tables: dict[int, tuple[Encoder, _PairTable]] = {}
+    tables: dict[int, tuple[BuiltinContext, _PairTable]] = {}  # one pair table per evaluation
 
-    def fn(enc: Encoder, args: tuple[ast.Term, ...], t: int, s: float, node: ast.Call) -> Tree:
+    def fn(ctx: BuiltinContext, args: tuple[ast.Term, ...], t: int, s: float, node: ast.Call) -> Tree:
         if len(args) != 1:
             raise EncodeError(MIL504("collision_free takes one argument (the distance d [m])",
-                                     _span(node)))
-        d = enc.term(args[0], t)
+                                     span_of(node)))
+        d = ctx.term(args[0], t)
         if not isinstance(d, float):
-            raise EncodeError(MIL501("collision_free(d): d must be known at solve time", _span(node)))
-        tb = tables.get(id(enc))
-        if s > 0 and tb is not None and tb[0] is enc and tb[1].ok_t[t]:  # fast: the pair table knows step t
+            raise EncodeError(MIL501("collision_free(d): d must be known at solve time", span_of(node)))
+        tb = tables.get(id(ctx))
+        if s > 0 and tb is not None and tb[0] is ctx and tb[1].ok_t[t]:  # fast: the pair table knows step t
             idx = np.arange(tb[1].start[t], tb[1].start[t + 1])
             return CollisionBlock(tb[1], idx, np.full(idx.size, d)) if idx.size else INF
         o = others[:, t]
         ok = np.isfinite(o).all(axis=1)
         if not ok.any():
             return s * INF
-        ex, ey = enc.signal_at(x, t), enc.signal_at(y, t)
+        ex, ey = ctx.signals.at(x, t), ctx.signals.at(y, t)
         if isinstance(ex, float) and isinstance(ey, float):
             return s * (float(np.min(np.abs(ex - o[ok, 0]) + np.abs(ey - o[ok, 1]))) - d)
         if s > 0 and isinstance(ex, Lin) and isinstance(ey, Lin) and len(ex.idx) == 1 and len(ey.idx) == 1:
-            tb = tables.get(id(enc))
-            if tb is None or tb[0] is not enc:
-                tb = (enc, _PairTable.of(enc, x, y, others, vid, opts))
+            tb = tables.get(id(ctx))
+            if tb is None or tb[0] is not ctx:
+                tb = (ctx, _PairTable.of(ctx.signals, x, y, others, vid, opts))
                 tables.clear()
-                tables[id(enc)] = tb
+                tables[id(ctx)] = tb
             idx = tb[1].at(t)
             if idx is not None:
                 return CollisionBlock(tb[1], idx, np.full(idx.size, d))
@@ -76,7 +83,7 @@ def collision_free_builtin(x: str, y: str, others: np.ndarray, *, ids: np.ndarra
             pair = mk(True, [add(add(scale(dx, a), scale(dy, b)), -d) for a, b in faces])
             if isinstance(pair, Op) and s > 0:
                 # exact: the least 1-norm distance from the ego's box to the vehicle, minus d
-                (xlo, xhi), (ylo, yhi) = enc.bounds(dx), enc.bounds(dy)
+                (xlo, xhi), (ylo, yhi) = ctx.bounds(dx), ctx.bounds(dy)
                 pair.lo_hint = max(xlo, -xhi, 0.0) + max(ylo, -yhi, 0.0) - d
             pairs.append(pair)
         return scale(mk(False, pairs), s) if pairs else s * INF
@@ -103,12 +110,12 @@ class _PairTable:
     __slots__ = ("xc", "xa", "xo", "yc", "ya", "yo", "step", "veh", "start", "ok_t", "code", "opts")
 
     @classmethod
-    def of(cls, enc: Encoder, x: str, y: str, others: np.ndarray, ids: np.ndarray | None = None,
+    def of(cls, signals: TraceSignals, x: str, y: str, others: np.ndarray, ids: np.ndarray | None = None,
            opts: tuple = (0.0, None)) -> "_PairTable":
         tb = cls()
         tb.opts = opts
-        sx, sy = enc.signals.get(x), enc.signals.get(y)
-        T = enc.T
+        sx, sy = signals.get(x), signals.get(y)
+        T = signals.length
         if not (hasattr(sx, "coef") and hasattr(sy, "coef")):
             tb.ok_t = np.zeros(T, bool)
             tb.start = np.zeros(T + 1, np.int64)
@@ -143,6 +150,7 @@ class CollisionBlock(Block):
     disjunction (one binary per face, big-M from the bounds)."""
 
     __slots__ = ("tb", "idx", "d", "_cache")
+    kind = "collision"
 
     def __init__(self, tb: _PairTable, idx: np.ndarray, d: np.ndarray) -> None:
         self.tb, self.idx, self.d = tb, idx, d
@@ -222,18 +230,18 @@ class CollisionBlock(Block):
         tvals = np.concatenate([vals.ravel(), np.ones(4 * n)])
         return StableLayout(codes[p], n, int(padded.sum()), cols, tvals, lo, possible[p].ravel().astype(float))
 
-    def emit(self, enc: Encoder, margin: float, guard: int) -> None:
+    def emit(self, sink: RowSink, margin: float, guard: int) -> None:
         """Rows for ``self ≥ margin`` (whenever ``x[guard] = 1``), vectorised."""
-        if enc.stable and guard < 0:
-            lay = self.stable_layout(enc.b.lb, enc.b.ub, margin)
+        if sink.stable and guard < 0:
+            lay = self.stable_layout(sink.lb, sink.ub, margin)
             if lay is not None and lay.failed:
-                enc._fail(guard)
+                sink.fail(guard)
                 return
             if lay is not None:
-                self._emit_stable(enc, lay)
+                self._emit_stable(sink, lay)
                 return
         xc, xa, xo, yc, ya, yo, step, veh = self._arr()
-        xlo, xhi, ylo, yhi = self._ranges(enc.b.lb, enc.b.ub)
+        xlo, xhi, ylo, yhi = self._ranges(sink.lb, sink.ub)
         d = self.d[:, None]
         # face f: a·dx + b·dy − d; its bounds over the box
         f_hi = np.where(_FA > 0, xhi[:, None], -xlo[:, None]) + np.where(_FB > 0, yhi[:, None], -ylo[:, None]) - d
@@ -243,7 +251,7 @@ class CollisionBlock(Block):
         keep = (f_hi >= margin) & live[:, None]
         nk = keep.sum(axis=1)
         if np.any(live & (nk == 0)):
-            enc._fail(guard)
+            sink.fail(guard)
         # constant part of each face: a·xo + b·yo − d − margin moves to the right-hand side
         cst = _FA[None] * xo[:, None] + _FB[None] * yo[:, None] - d - margin
         ca = _FA[None] * xa[:, None]
@@ -262,56 +270,50 @@ class CollisionBlock(Block):
                 cols = np.stack([xc[pi], yc[pi]], 1)
                 vals = np.stack([ca[pi, fi], cb[pi, fi]], 1)
                 lo = -cst[pi, fi]
-            rows = enc.emit_rows(cols, vals, lo)
-            if guard >= 0:
-                enc._rows_of_guard.setdefault(guard, []).extend(rows.tolist())
+            sink.emit_rows(cols, vals, lo, guard)
         mp = np.flatnonzero(multi)  # disjunctions (two or more faces): one binary per kept face
         if mp.size:
             pi, fi = np.nonzero(keep[mp])
             pi = mp[pi]
             nb = pi.size
-            blk = enc.b.add_vars("cf", nb, 0.0, 1.0, integer=True)
-            enc.n_bin += nb
-            bcols = np.arange(blk.start, blk.stop)
+            bcols = sink.add_binaries("cf", nb)
             M = margin - f_lo[pi, fi]
-            rows = enc.emit_rows(np.stack([xc[pi], yc[pi], bcols], 1),
-                                 np.stack([ca[pi, fi], cb[pi, fi], -M], 1), -cst[pi, fi] - M)
+            rows = sink.emit_rows(np.stack([xc[pi], yc[pi], bcols], 1),
+                                  np.stack([ca[pi, fi], cb[pi, fi], -M], 1), -cst[pi, fi] - M)
             starts = np.concatenate([[0], np.cumsum(nk[mp])])
             owner = np.repeat(np.arange(mp.size), nk[mp])
-            covers = enc.emit_grouped(owner, bcols, mp.size, extra_col=guard, lo=0.0 if guard >= 0 else 1.0)
+            covers = sink.emit_covers(owner, bcols, mp.size, extra_col=guard, lo=0.0 if guard >= 0 else 1.0)
             # one disjunction per pair: its binaries, each enabling one face row (rows[i])
-            enc.add_disjunctions(bcols, rows, covers, starts, guard)
+            sink.add_disjunctions(bcols, rows, covers, starts, guard)
 
-
-    @staticmethod
-    def _emit_stable(enc: Encoder, lay: "StableLayout") -> None:
-        from twolevel.compiler.driver import Emission
-
+    def _emit_stable(self, sink: RowSink, lay: "StableLayout") -> None:
         n, nb = lay.n, 4 * lay.n  # n = 0 still records an (empty) emission: the structure
-        blk = enc.b.add_vars("cf", nb, 0.0, 1.0, integer=True)
-        enc.n_bin += nb
-        bcols = np.arange(blk.start, blk.stop)
-        enc.b.tighten(bcols, 0.0, lay.bin_ub)
-        t0, r0 = enc.n_triplets(), enc._n
+        bcols = sink.add_binaries("cf", nb)
+        sink.tighten(bcols, 0.0, lay.bin_ub)
+        since = sink.mark()
         v = lay.tvals[: 3 * nb].reshape(nb, 3)
-        rows = enc.emit_rows(np.stack([lay.cols[0], lay.cols[1], bcols], 1), v, lay.lo[:nb])
-        covers = enc.emit_grouped(np.repeat(np.arange(n), 4), bcols, n, lo=1.0)
-        enc.add_disjunctions(bcols, rows, covers, np.arange(0, nb + 1, 4), -1)
-        enc.emissions.append(Emission("collision", slice(t0, enc.n_triplets()), slice(r0, enc._n), bcols,
-                                      (lay.codes,)))
+        rows = sink.emit_rows(np.stack([lay.cols[0], lay.cols[1], bcols], 1), v, lay.lo[:nb])
+        covers = sink.emit_covers(np.repeat(np.arange(n), 4), bcols, n, lo=1.0)
+        sink.add_disjunctions(bcols, rows, covers, np.arange(0, nb + 1, 4), -1)
+        sink.record(self.kind, since, bcols, (lay.codes,))
 
 
+@dataclass(frozen=True, slots=True)
 class StableLayout:
     """The values of a stable collision emission: pair ``codes`` (n,), the ego columns of each
-    face row, every triplet value in emission order (face rows x, y, binary; then the cover
-    rows' ones), every row's lower bound (face rows, then covers), each binary's upper bound;
-    ``n_padded``: how many pairs can come within d + pad now."""
+    face row (x, y), every triplet value in emission order (face rows x, y, binary; then the
+    cover rows' ones), every row's lower bound (face rows, then covers), each binary's upper
+    bound; ``n_padded``: how many pairs can come within d + pad now; ``failed``: a pair can never
+    be kept clear (no face can hold)."""
 
-    __slots__ = ("codes", "n", "n_padded", "cols", "tvals", "lo", "bin_ub", "failed")
-
-    def __init__(self, codes, n, n_padded, cols, tvals, lo, bin_ub, failed=False):  # type: ignore[no-untyped-def]
-        self.codes, self.n, self.n_padded, self.cols = codes, n, n_padded, cols
-        self.tvals, self.lo, self.bin_ub, self.failed = tvals, lo, bin_ub, failed
+    codes: np.ndarray | None
+    n: int
+    n_padded: int
+    cols: tuple[np.ndarray, ...]
+    tvals: np.ndarray
+    lo: np.ndarray
+    bin_ub: np.ndarray
+    failed: bool = False
 
 
 def _merge_tables(blocks: list[Block]) -> CollisionBlock:

@@ -1,8 +1,14 @@
-"""Robustness trees → rows of the model: min as rows, max as disjunctions with big-M from bounds.
+"""Stage 2 of the compiler: robustness trees → rows of the model.
 
-The emission half of :class:`twolevel.compiler.encoder.Encoder` (a mixin over its state): new
-variables, guarded rows, vectorised blocks, disjunctions, requiring a tree above a margin, and
-the final flush of every emitted row into the builder's ``stl`` block.
+:class:`RowEmitter` requires a tree above a margin (:meth:`RowEmitter.require`): a ``min`` needs
+its children's rows only; a ``max`` over decision variables becomes a
+:class:`~twolevel.milp.model.Disjunction`, one binary per disjunct, whose big-M rows get M from
+the interval bounds of the row over the columns' bounds (never a blanket constant). A disjunct
+that can never hold (upper bound below the margin) is dropped; one that always holds removes
+its disjunction. A node with two or more parents (:class:`~twolevel.compiler.tree.Parents`) is
+encoded once, through a variable ``z ≤ robustness``. Blocks emit themselves through the
+:class:`~twolevel.compiler.block.RowSink` this class implements. Rows are collected as arrays
+and go into the builder as one block at :meth:`RowEmitter.flush`.
 """
 
 from __future__ import annotations
@@ -12,47 +18,106 @@ from typing import Sequence
 
 import numpy as np
 
-from twolevel.compiler.types import MIL502, AffineSignal, EncodeError, Signal, _NOWHERE, _has_block
+from twolevel.compiler.block import Block
+from twolevel.compiler.codes import MIL502, NOWHERE, EncodeError
+from twolevel.compiler.tree import INF, IntervalBounds, Lin, Op, Parents, Tree, negate
+from twolevel.compiler.types import Emission, PendingDisjunction
+from twolevel.milp.builder import ModelBuilder
 from twolevel.milp.model import Disjunction
-from twolevel.compiler.tree import INF, Block, Lin, Op, Tree, bounds, negate
 
 __all__ = ["RowEmitter"]
 
 
 class RowEmitter:
-    """Mixin: requires trees in the builder (state lives in the encoder)."""
+    """Requires robustness trees in ``builder`` (rows ``Σ v·x ≥ lo``); ``bounds`` and ``parents``
+    are shared with stage 1; ``stable``: blocks at top level keep a value-independent structure
+    and record it (:attr:`emissions`). ``label`` names the requirement being emitted (rule@step)
+    on its disjunctions."""
 
-    # ------------------------------------------------------------------ rows
-    def bounds(self, t: Tree) -> tuple[float, float]:
-        return bounds(t, self.b.lb, self.b.ub, self._bnd)
+    def __init__(self, builder: ModelBuilder, bounds: IntervalBounds, parents: Parents, *,
+                 stable: bool = False) -> None:
+        self._b = builder
+        self._bounds = bounds
+        self._parents = parents
+        self.stable = stable
+        self.label = ""
+        self.emissions: list[Emission] = []
+        self.infeasible = False  # a requirement fails by constants alone
+        self.binaries = 0
+        self.continuous = 0
+        # emitted rows, concatenated once in :meth:`flush`
+        self._r: list[np.ndarray] = []
+        self._c: list[np.ndarray] = []
+        self._v: list[np.ndarray] = []
+        self._lo: list[float | np.ndarray] = []
+        self._n = 0
+        self._row0 = builder.n_rows
+        self._disj: list[PendingDisjunction] = []
+        self._rows_of_guard: dict[int, list[int]] = {}
+        self._shared: dict[int, Lin] = {}  # id(tree) → its shared variable
+        self._exact: dict[int, Lin] = {}   # id(tree) → a variable equal to it
+        self._keep: list[object] = []      # trees whose identity keys the two tables above
 
-    def _new_var(self, name: str, lo: float, hi: float, binary: bool = False) -> int:
-        blk = self.b.add_vars(name, 1, lo, hi, integer=binary)
-        if binary:
-            self.n_bin += 1
-        else:
-            self.n_cont += 1
+    # ------------------------------------------------------------------ counts
+    @property
+    def rows(self) -> int:
+        """Rows emitted so far."""
+        return self._n
+
+    @property
+    def disjunctions(self) -> int:
+        """Disjunctions emitted so far."""
+        return len(self._disj)
+
+    # ------------------------------------------------------------------ the row sink of blocks
+    @property
+    def lb(self) -> np.ndarray:
+        return self._b.lb
+
+    @property
+    def ub(self) -> np.ndarray:
+        return self._b.ub
+
+    def add_continuous(self, name: str, lo: float, hi: float) -> int:
+        """A new continuous column in [lo, hi]; its index."""
+        blk = self._b.add_vars(name, 1, lo, hi)
+        self.continuous += 1
         return blk.start
 
-    def _row(self, idx: Sequence[int], val: Sequence[float], lo: float, guard: int) -> int:
-        """Emit ``Σ val·x[idx] ≥ lo``; returns the global row index."""
-        r = self._row0 + self._n
-        self._r.append(np.full(len(idx), self._n, np.int64))
-        self._c.append(np.asarray(idx, np.int64))
-        self._v.append(np.asarray(val, float))
-        self._lo.append(lo)
-        self._n += 1
+    def add_binaries(self, name: str, n: int) -> np.ndarray:
+        blk = self._b.add_vars(name, n, 0.0, 1.0, integer=True)
+        self.binaries += n
+        return np.arange(blk.start, blk.stop)
+
+    def _add_binary(self) -> int:
+        blk = self._b.add_vars("b", 1, 0.0, 1.0, integer=True)
+        self.binaries += 1
+        return blk.start
+
+    def tighten(self, cols: np.ndarray, lb: np.ndarray | float, ub: np.ndarray | float) -> None:
+        self._b.tighten(cols, lb, ub)
+
+    def fail(self, guard: int) -> None:
+        """The current requirement cannot hold: forbid the guard, or mark the model infeasible."""
         if guard >= 0:
-            self._rows_of_guard.setdefault(guard, []).append(r)
-        return r
+            self._b.tighten(np.array([guard]), 0.0, 0.0)
+            return
+        self.infeasible = True
+        self._row((), (), 1.0, -1)  # 0 ≥ 1: the model is honestly infeasible
 
-    def n_triplets(self) -> int:
-        """Triplets emitted so far (encoder-local)."""
-        return int(sum(c.size for c in self._c))
+    def mark(self) -> tuple[int, int]:
+        return int(sum(c.size for c in self._c)), self._n
 
-    def emit_rows(self, cols: np.ndarray, vals: np.ndarray, lo: np.ndarray) -> np.ndarray:
-        """Emit rows ``Σ_j vals[i, j]·x[cols[i, j]] ≥ lo[i]`` at once (unguarded bookkeeping is
-        the caller's); returns their global row indices."""
+    def record(self, kind: str, since: tuple[int, int], bins: np.ndarray, struct: tuple[np.ndarray, ...]) -> None:
+        t1, r1 = self.mark()
+        self.emissions.append(Emission(kind, slice(since[0], t1), slice(since[1], r1), bins, struct))
+
+    def _guarded(self, rows: np.ndarray, guard: int) -> np.ndarray:
+        if guard >= 0:
+            self._rows_of_guard.setdefault(guard, []).extend(rows.tolist())
+        return rows
+
+    def emit_rows(self, cols: np.ndarray, vals: np.ndarray, lo: np.ndarray, guard: int = -1) -> np.ndarray:
         n, m = cols.shape
         first = self._n
         self._r.append(np.repeat(np.arange(first, first + n), m))
@@ -60,44 +125,20 @@ class RowEmitter:
         self._v.append(vals.ravel().astype(float))
         self._lo.append(np.asarray(lo, float))
         self._n += n
-        return self._row0 + np.arange(first, first + n)
+        return self._guarded(self._row0 + np.arange(first, first + n), guard)
 
-    def emit_triplets(self, n: int, r: np.ndarray, c: np.ndarray, v: np.ndarray, lo: np.ndarray) -> np.ndarray:
-        """Emit ``n`` rows ``Σ v·x[c] ≥ lo`` from triplets with block-local rows ``r``."""
+    def emit_triplets(self, n: int, r: np.ndarray, c: np.ndarray, v: np.ndarray, lo: np.ndarray,
+                      guard: int = -1) -> np.ndarray:
         first = self._n
         self._r.append(np.asarray(r, np.int64) + first)
         self._c.append(np.asarray(c, np.int64))
         self._v.append(np.asarray(v, float))
         self._lo.append(np.asarray(lo, float))
         self._n += n
-        return self._row0 + np.arange(first, first + n)
+        return self._guarded(self._row0 + np.arange(first, first + n), guard)
 
-    def dense_width(self) -> int | None:
-        """The column count every affine signal is expressed over (None if they differ)."""
-        ws = {s.coef.shape[1] for s in self.signals.values() if isinstance(s, AffineSignal)}
-        return ws.pop() if len(ws) == 1 else (0 if not ws else None)
-
-    def dense_signal(self, name: str, n: int) -> tuple[np.ndarray, np.ndarray] | None:
-        """Signal ``name`` as dense rows over the trace: (C (T, n), offset (T,)), cached."""
-        hit = self._dense.get(name)
-        if hit is not None:
-            return hit
-        s = self.signals.get(name)
-        if s is None:
-            return None
-        if isinstance(s, AffineSignal):
-            rows = np.repeat(np.arange(self.T), np.diff(s.coef.indptr))
-            flat = rows * n + np.asarray(s.coef.indices)
-            C = np.bincount(flat, weights=np.asarray(s.coef.data, float), minlength=self.T * n).reshape(self.T, n)
-            out = (C, np.asarray(s.offset, float))
-        else:
-            out = (np.zeros((self.T, n)), np.broadcast_to(np.asarray(s, float), (self.T,)).astype(float))
-        self._dense[name] = out
-        return out
-
-    def emit_grouped(self, owner: np.ndarray, cols: np.ndarray, n_groups: int, *, extra_col: int = -1,
-                     lo: float = 1.0) -> np.ndarray:
-        """One row per group ``g``: ``Σ_{owner[i] = g} x[cols[i]] (− x[extra_col]) ≥ lo`` (cover rows)."""
+    def emit_covers(self, owner: np.ndarray, cols: np.ndarray, n_groups: int, *, extra_col: int = -1,
+                    lo: float = 1.0) -> np.ndarray:
         first = self._n
         r = first + owner
         c = cols
@@ -115,53 +156,48 @@ class RowEmitter:
 
     def add_disjunctions(self, bins: np.ndarray, rows: np.ndarray, covers: np.ndarray, starts: np.ndarray,
                          guard: int) -> None:
-        """Record many disjunctions at once: disjunction j has binaries ``bins[starts[j]:starts[j+1]]``,
-        binary i enabling the single row ``rows[i]``, and cover row ``covers[j]`` (vectorised
-        built-ins; label: the current requirement)."""
-        base = len(self.b.disjunctions) + len(self._disj)
+        base = len(self._b.disjunctions) + len(self._disj)
         st = starts.tolist()
         for j in range(len(st) - 1):
             a, b = st[j], st[j + 1]
-            self._disj.append(dict(id=base + j, binaries=bins[a:b], cover=int(covers[j]), guard=guard,
-                                   label=self._label, sources=(), rows=tuple(rows[i:i + 1] for i in range(a, b))))
+            self._disj.append(PendingDisjunction(base + j, bins[a:b], int(covers[j]), guard, self.label, (),
+                                                 tuple(rows[i:i + 1] for i in range(a, b))))
 
-    def add_disjunction(self, binaries: list[int], cover: int, guard: int, label: str = "",
-                        sources: tuple[object, ...] = ()) -> None:
-        """Record a disjunction whose rows were emitted (``_rows_of_guard`` filled by the caller)."""
-        did = len(self.b.disjunctions) + len(self._disj)
-        self._disj.append(dict(id=did, binaries=binaries, cover=cover, guard=guard,
-                               label=label or self._label, sources=sources))
-
-    def _fail(self, guard: int) -> None:
-        """The current requirement cannot hold: forbid the guard, or mark the model infeasible."""
+    # ------------------------------------------------------------------ trees
+    def _row(self, idx: Sequence[int], val: Sequence[float], lo: float, guard: int) -> int:
+        """Emit ``Σ val·x[idx] ≥ lo``; returns the global row index."""
+        r = self._row0 + self._n
+        self._r.append(np.full(len(idx), self._n, np.int64))
+        self._c.append(np.asarray(idx, np.int64))
+        self._v.append(np.asarray(val, float))
+        self._lo.append(lo)
+        self._n += 1
         if guard >= 0:
-            self.b.tighten(np.array([guard]), 0.0, 0.0)
-            return
-        self.infeasible = True
-        self._row((), (), 1.0, -1)  # 0 ≥ 1: the model is honestly infeasible
+            self._rows_of_guard.setdefault(guard, []).append(r)
+        return r
 
     def require(self, t: Tree, margin: Lin | float, guard: int = -1) -> None:
         """Add rows so that ``t ≥ margin`` holds whenever ``x[guard] = 1`` (always if −1)."""
-        mlo, mhi = self.bounds(margin)
-        tlo, thi = self.bounds(t)
+        mlo, mhi = self._bounds(margin)
+        tlo, thi = self._bounds(t)
         if tlo >= mhi and not (self.stable and guard < 0 and _has_block(t)):
             return  # always holds (stable mode still emits top-level blocks: a fixed structure)
         if thi < mlo:
-            self._fail(guard)
+            self.fail(guard)
             return
         if isinstance(t, float) or isinstance(t, Lin):
             self._leaf(t, margin, guard, mhi)
             return
         if isinstance(t, Block):
             if isinstance(margin, float):
-                t.emit(self, margin, guard)  # type: ignore[attr-defined]
+                t.emit(self, margin, guard)
             else:
                 self.require(t.expand(), margin, guard)
             return
-        if self._refs.get(id(t), 0) >= 2:
+        if self._parents.shared(t):
             z = self._shared.get(id(t))
             if z is None:
-                zc = self._new_var("z", tlo, thi)
+                zc = self.add_continuous("z", tlo, thi)
                 z = Lin((zc,), (1.0,), 0.0)
                 self._shared[id(t)] = z
                 self._keep.append(z)
@@ -175,27 +211,26 @@ class RowEmitter:
             for k in t.kids:
                 self.require(k, margin, guard)
             return
-        mlo, mhi = self.bounds(margin)
+        mlo, mhi = self._bounds(margin)
         kids = []
         for k in t.kids:
-            klo, khi = self.bounds(k)
+            klo, khi = self._bounds(k)
             if klo >= mhi:
                 return  # a disjunct always holds: no disjunction
             if khi >= mlo:
                 kids.append(k)
         if not kids:
-            self._fail(guard)
+            self.fail(guard)
             return
         if len(kids) == 1:
             self.require(kids[0], margin, guard)
             return
-        bins = [self._new_var("b", 0.0, 1.0, binary=True) for _ in kids]
+        bins = [self._add_binary() for _ in kids]
         idx = bins + ([guard] if guard >= 0 else [])
         val = [1.0] * len(bins) + ([-1.0] if guard >= 0 else [])
         cover = self._row(idx, val, 0.0 if guard >= 0 else 1.0, -1)
-        did = len(self.b.disjunctions) + len(self._disj)
-        self._disj.append(dict(id=did, binaries=bins, cover=cover, guard=guard,
-                               label=self._label, sources=tuple(kids)))
+        did = len(self._b.disjunctions) + len(self._disj)
+        self._disj.append(PendingDisjunction(did, bins, cover, guard, self.label, tuple(kids)))
         for bcol, k in zip(bins, kids):
             self.require(k, margin, bcol)
 
@@ -213,18 +248,18 @@ class RowEmitter:
                 val.extend(v * sgn for v in x.val)
                 const += sgn * x.c
         if guard >= 0:
-            tlo = self.bounds(t)[0]
+            tlo = self._bounds(t)[0]
             M = mhi - tlo
             if not math.isfinite(M):
                 raise EncodeError(MIL502(
                     "a disjunct's expression is unbounded; give every variable finite bounds",
-                    _NOWHERE, hint="bound the states and inputs (reachable boxes)"))
+                    NOWHERE, hint="bound the states and inputs (reachable boxes)"))
             idx.append(guard)
             val.append(-M)
             self._row(idx, val, -M - const, guard)
         elif not idx:
             if const < 0:
-                self._fail(-1)
+                self.fail(-1)
         else:
             self._row(idx, val, -const, -1)
 
@@ -232,35 +267,40 @@ class RowEmitter:
         """A leaf equal to ``t`` exactly (a new ``z`` with two one-sided encodings)."""
         if isinstance(t, (float, Lin)):
             return t
-        z = self._shared.get(-id(t))
+        z = self._exact.get(id(t))
         if z is None:
-            lo, hi = self.bounds(t)
-            zc = self._new_var("zx", lo, hi)
+            lo, hi = self._bounds(t)
+            zc = self.add_continuous("zx", lo, hi)
             z = Lin((zc,), (1.0,), 0.0)
             nz = Lin((zc,), (-1.0,), 0.0)
             self._keep.extend([t, z, nz])
-            self._shared[-id(t)] = z
+            self._exact[id(t)] = z
             self.require(t, z)            # z ≤ t
             self.require(negate(t), nz)   # −t ≥ −z
         return z
 
     # ------------------------------------------------------------------ output
     def flush(self, name: str) -> np.ndarray:
-        """Add every emitted row to the builder as one block and register the disjunctions."""
+        """Add every emitted row to the builder as one block named ``name`` and register the
+        disjunctions; returns the block's row indices."""
         rows = np.concatenate(self._r) if self._r else np.zeros(0, np.int64)
         cols = np.concatenate(self._c) if self._c else np.zeros(0, np.int64)
         vals = np.concatenate(self._v) if self._v else np.zeros(0)
-        assert self.b.n_rows == self._row0, "rows added to the builder while encoding"
+        assert self._b.n_rows == self._row0, "rows added to the builder while encoding"
         if any(isinstance(v, np.ndarray) for v in self._lo):
             lo = np.concatenate([np.atleast_1d(np.asarray(v, float)) for v in self._lo]) if self._lo else np.zeros(0)
         else:
             lo = np.asarray(self._lo, float)
-        out = self.b.add_rows(name, self._n, rows, cols, vals, lo, INF)
+        out = self._b.add_rows(name, self._n, rows, cols, vals, lo, INF)
         for d in self._disj:
-            rws = d.get("rows")
-            self.b.add_disjunction(Disjunction(
-                id=d["id"], binaries=np.asarray(d["binaries"], np.int64),
-                rows=rws if rws is not None else
-                tuple(np.asarray(self._rows_of_guard.get(bc, []), np.int64) for bc in d["binaries"]),
-                cover_row=d["cover"], guard=d["guard"], label=d["label"], sources=d["sources"]))
+            self._b.add_disjunction(Disjunction(
+                id=d.id, binaries=np.asarray(d.binaries, np.int64),
+                rows=d.rows if d.rows is not None else
+                tuple(np.asarray(self._rows_of_guard.get(bc, []), np.int64) for bc in d.binaries),
+                cover_row=d.cover, guard=d.guard, label=d.label, sources=d.sources))
         return out
+
+
+def _has_block(t: Tree) -> bool:
+    """``t`` is a block or a ``min`` with a block child."""
+    return isinstance(t, Block) or (isinstance(t, Op) and not t.is_max and any(isinstance(k, Block) for k in t.kids))

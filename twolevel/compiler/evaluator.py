@@ -1,57 +1,77 @@
-"""Formulas → robustness trees (:mod:`twolevel.compiler.tree`) over the trace, constants folded.
+"""Stage 1 of the compiler: a formula at one trace step → its robustness tree.
 
-The evaluation half of :class:`twolevel.compiler.encoder.Encoder` (a mixin over its state): signals
-at a step, arithmetic terms, every operator of the language with the offline monitor's
-semantics (see :mod:`twolevel.compiler.driver`).
+:class:`Evaluator` evaluates terms and every operator of the language with the offline
+monitor's semantics (RTAMT's discrete-time offline semantics: windows truncated at the ends of
+the trace, empty ``always``/``historically`` windows +inf, empty ``eventually``/``once`` windows
+−inf, ``next`` past the end and ``prev`` before the start +inf) into the tree of
+:mod:`twolevel.compiler.tree`, every constant folded. ``always`` over a conjunction of linear
+predicates becomes one :class:`~twolevel.compiler.affine_block.AffineBlock`; a call
+``name(args)`` goes to the built-in of that name (e.g.
+:func:`~twolevel.compiler.collision.collision_free_builtin`). ``iff``/``xor`` need the exact
+values of both sides: those come from the ``exact`` hook (stage 2's
+:meth:`~twolevel.compiler.emitter.RowEmitter.value`).
 """
 
 from __future__ import annotations
 
-import numpy as np
+from typing import Callable, Mapping
 
-from twolevel.compiler.types import MIL501, MIL504, AffineSignal, EncodeError, _span
-from twolevel.compiler.tree import INF, Op, Tree, add, lin, mk, negate, scale
+from twolevel.compiler.affine_block import vector_always
+from twolevel.compiler.codes import MIL501, MIL504, EncodeError, span_of
+from twolevel.compiler.signals import TraceSignals
+from twolevel.compiler.tree import INF, IntervalBounds, Op, Parents, Tree, add, mk, negate, scale
+from twolevel.compiler.types import Builtin
 from twolevel.stl import ast
 
-__all__ = ["TreeEvaluator"]
+__all__ = ["Evaluator"]
 
 
-class TreeEvaluator:
-    """Mixin: evaluates formulas into robustness trees (state lives in the encoder)."""
+class Evaluator:
+    """Evaluates formulas over ``signals`` (sample period ``dt`` [s]) into folded robustness
+    trees, memoised per (formula node, step, sign). ``rules``: named rules a formula may refer
+    to; ``builtins``: built-in predicates by name; ``bounds``: the interval bounds shared with
+    stage 2; ``parents``: where the parents of each node are counted (for stage 2's sharing);
+    ``exact``: a tree → a leaf equal to it (for ``iff``/``xor``); ``stable``: blocks keep rows
+    that are constant now (see :class:`~twolevel.compiler.types.Emission`)."""
+
+    def __init__(
+        self, signals: TraceSignals, dt: float, bounds: IntervalBounds, *,
+        rules: Mapping[str, ast.Node] | None = None,
+        builtins: Mapping[str, Builtin] | None = None,
+        parents: Parents | None = None,
+        exact: Callable[[Tree], Tree] | None = None,
+        stable: bool = False,
+    ) -> None:
+        self.signals = signals
+        self.dt = dt
+        self._bounds = bounds
+        self.rules = dict(rules or {})
+        self.builtins = dict(builtins or {})
+        self.parents = Parents() if parents is None else parents
+        self._exact = exact
+        self.stable = stable
+        self._memo: dict[tuple[int, int, float], Tree] = {}
+        self._keep: list[object] = []  # formula nodes whose identity keys the memo
+
+    @property
+    def length(self) -> int:
+        """Steps of the trace [samples]."""
+        return self.signals.length
+
+    def bounds(self, t: Tree) -> tuple[float, float]:
+        """Interval bounds of ``t`` over the current column bounds."""
+        return self._bounds(t)
 
     # ------------------------------------------------------------------ terms
-    def signal_at(self, name: str, k: int, node: ast.Node | None = None) -> Tree:
-        """The value of signal ``name`` at trace step ``k`` as a tree leaf."""
-        key = (name, k)
-        hit = self._sig.get(key)
-        if hit is not None:
-            return hit
-        s = self.signals.get(name)
-        if s is None:
-            if name in self.consts:
-                return float(self.consts[name])
-            raise EncodeError(MIL504(f"unknown signal or constant '{name}'", _span(node),
-                                     hint="pass it in signals= or consts="))
-        if isinstance(s, AffineSignal):
-            C = s.coef
-            a, b = C.indptr[k], C.indptr[k + 1]
-            out = lin(tuple(int(i) for i in C.indices[a:b]),
-                      tuple(float(v) for v in C.data[a:b]), float(s.offset[k]))
-        elif np.ndim(s) == 0:
-            out = float(s)
-        else:
-            out = float(np.asarray(s)[k])
-        self._sig[key] = out
-        return out
-
     def term(self, node: ast.Node, t: int) -> Tree:
         """A term at step ``t``: constant, affine, or min/max of affine pieces (``abs``)."""
         if isinstance(node, ast.Num):
             return float(node.value)
         if isinstance(node, ast.Var):
-            if node.name in self.consts and node.name not in self.signals:
-                return float(self.consts[node.name])
-            return self.signal_at(node.name, t, node)
+            c = self.signals.const(node.name)
+            if c is not None:
+                return c
+            return self.signals.at(node.name, t, node)
         if isinstance(node, ast.Neg):
             return negate(self.term(node.operand, t))
         if isinstance(node, ast.Abs):
@@ -70,36 +90,40 @@ class TreeEvaluator:
                     return scale(b, a)
                 if isinstance(b, float):
                     return scale(a, b)
-                raise EncodeError(MIL501("product of two decision-dependent terms", _span(node),
+                raise EncodeError(MIL501("product of two decision-dependent terms", span_of(node),
                                          hint="one factor must be known at solve time"))
             if node.op == "/":
                 if isinstance(b, float) and b != 0.0:
                     return scale(a, 1.0 / b)
                 raise EncodeError(MIL501("division by a decision-dependent term or by zero",
-                                         _span(node), hint="divide by a known non-zero value"))
-        raise EncodeError(MIL504(f"cannot encode term {type(node).__name__}", _span(node)))
+                                         span_of(node), hint="divide by a known non-zero value"))
+        raise EncodeError(MIL504(f"cannot encode term {type(node).__name__}", span_of(node)))
 
     # ------------------------------------------------------------------ formulas
     def rob(self, node: ast.Node, t: int, s: float = 1.0) -> Tree:
         """``s ·`` robustness of ``node`` at trace step ``t`` (s = ±1) as a folded tree."""
         key = (id(node), t, s)
-        hit = self._rob.get(key)
+        hit = self._memo.get(key)
         if hit is not None:
             return hit
         out = self._rob_new(node, t, s)
         if isinstance(out, Op):
             for k in out.kids:
-                if isinstance(k, Op):
-                    self._refs[id(k)] = self._refs.get(id(k), 0) + 1
-        self._rob[key] = out
+                self.parents.add(k)
+        self._memo[key] = out
         self._keep.append(node)
         return out
+
+    def _value(self, t: Tree) -> Tree:
+        if self._exact is None:
+            raise ValueError("iff/xor need exact values: give the evaluator an exact= hook (stage 2)")
+        return self._exact(t)
 
     def _comb(self, is_max: bool, kids: list[Tree], s: float) -> Tree:
         return mk(is_max if s > 0 else not is_max, kids)
 
     def _window(self, t: int, iv: ast.Interval | None, past: bool) -> range:
-        T = self.T
+        T = self.signals.length
         if iv is None:
             return range(0, t + 1) if past else range(t, T)
         a, b = iv.steps(self.dt)
@@ -130,8 +154,8 @@ class TreeEvaluator:
                 return self._comb(n.op == "or", [self.rob(n.left, t, s), self.rob(n.right, t, s)], s)
             if n.op == "implies":
                 return self._comb(True, [self.rob(n.left, t, -s), self.rob(n.right, t, s)], s)
-            za = self.value(self.rob(n.left, t, 1.0))
-            zb = self.value(self.rob(n.right, t, 1.0))
+            za = self._value(self.rob(n.left, t, 1.0))
+            zb = self._value(self.rob(n.right, t, 1.0))
             d = add(za, negate(zb))
             if isinstance(d, float):
                 v: Tree = abs(d) if n.op == "xor" else -abs(d)
@@ -142,13 +166,11 @@ class TreeEvaluator:
             op = n.op
             if op in ("next", "prev"):
                 k = t + 1 if op == "next" else t - 1
-                return self.rob(n.operand, k, s) if 0 <= k < self.T else s * INF
+                return self.rob(n.operand, k, s) if 0 <= k < self.signals.length else s * INF
             past = op in ("historically", "once")
             w = self._window(t, n.interval, past)
             if op == "always" and s > 0:
-                from twolevel.compiler.affine_block import vector_always
-
-                fast = vector_always(self, n, w)
+                fast = vector_always(self.signals, n, w, self.stable)
                 if fast is not None:
                     return fast
             is_max = op in ("eventually", "once")
@@ -181,11 +203,11 @@ class TreeEvaluator:
         if isinstance(n, ast.Call):
             fn = self.builtins.get(n.name)
             if fn is None:
-                raise EncodeError(MIL504(f"unknown built-in '{n.name}'", _span(n)))
+                raise EncodeError(MIL504(f"unknown built-in '{n.name}'", span_of(n)))
             return fn(self, n.args, t, s, n)
         if isinstance(n, ast.Rule):
             return self.rob(n.formula, t, s)
-        raise EncodeError(MIL504(f"cannot encode {type(n).__name__}", _span(n)))
+        raise EncodeError(MIL504(f"cannot encode {type(n).__name__}", span_of(n)))
 
     def _until(self, n: ast.BinTemporal, t: int, s: float) -> Tree:
         kids = []
@@ -193,4 +215,3 @@ class TreeEvaluator:
             parts = [self.rob(n.right, k, s)] + [self.rob(n.left, j, s) for j in range(t, k)]
             kids.append(self._comb(False, parts, s))
         return self._comb(True, kids, s)
-

@@ -1,25 +1,60 @@
-"""Robustness expression trees: min/max trees over affine leaves, folded as they are built.
+"""The robustness tree: the compiler's intermediate representation (IR).
 
-The encoder evaluates a formula at one step into such a tree: a ``float`` (a constant, ±inf
-allowed), a :class:`Lin` (an affine expression of decision variables) or an :class:`Op`
-(``min``/``max`` of children). Constants fold on construction, so a subformula known at solve
-time never reaches the model. Negation is pushed to the leaves (``-min = max of -``).
+Who makes it and who reads it:
+
+* produced by stage 1, :class:`twolevel.compiler.evaluator.Evaluator` (a formula at one trace
+  step → a tree), and by the built-ins it calls (:mod:`twolevel.compiler.collision`);
+* consumed by stage 2, :class:`twolevel.compiler.emitter.RowEmitter` (a tree → rows of the
+  model), by the driver (:func:`twolevel.compiler.driver.encode`: bounds of the margin, rule
+  recovery) and, outside the compiler, by :mod:`twolevel.control.template`, which pattern-matches
+  the top-level trees of a stable encoding (``Encoding.trees``: a ``min`` of :class:`Block` s and
+  at most one constant) to refresh a step model in place. A change of the node classes or of the
+  invariants below must keep that consumer right.
+
+A tree (:data:`Tree`) is one of
+
+* ``float`` — a constant known at solve time; ``+inf`` holds always, ``−inf`` never;
+* :class:`Lin` — ``Σ val_i · x[idx_i] + c``, affine in the decision variables ``x``;
+* :class:`Op` — the ``min`` or ``max`` of two or more children;
+* :class:`~twolevel.compiler.block.Block` — a vectorised leaf: a whole family of min/max
+  structure held in arrays (see :mod:`twolevel.compiler.block`).
+
+Invariants, kept by building trees only through :func:`lin`, :func:`mk`, :func:`add` and
+:func:`scale`:
+
+* **constants folded**: a :class:`Lin` has distinct indices and at least one non-zero
+  coefficient (else it is a float); an :class:`Op` has at most one float child, never its
+  neutral element (−inf under ``max``) and never its absorbing one (the whole ``Op`` is then that
+  constant); an :class:`Op` of one child is that child. A subformula known at solve time never
+  reaches the model.
+* **flat**: an :class:`Op` has no child :class:`Op` of the same kind.
+* **negation at the leaves**: there is no negation node; ``scale(t, −1)`` swaps ``min`` and
+  ``max`` down to the leaves (``−min(a, b) = max(−a, −b)``).
+* **blocks are never scaled or added to**: :func:`scale` and :func:`add` replace a block by its
+  plain tree (``Block.expand``); several blocks of one type under one ``min`` merge into one.
+* **shared, by identity**: stage 1 memoises each (subformula, step, sign), so a subformula
+  reached twice is the same object; :class:`Parents` counts the parents of each ``Op`` by
+  identity and :class:`IntervalBounds` memoises by identity (keeping the tree alive).
 """
 
 from __future__ import annotations
 
 import math
-from typing import Union
+from dataclasses import dataclass
+from typing import Protocol, Union
 
 import numpy as np
 
-__all__ = ["Lin", "Op", "Block", "Tree", "mk", "add", "scale", "negate", "bounds"]
+from twolevel.compiler.block import Block
+
+__all__ = ["INF", "Lin", "Op", "Tree", "lin", "mk", "add", "scale", "negate",
+           "ColumnBounds", "Box", "IntervalBounds", "Parents"]
 
 INF = math.inf
 
 
 class Lin:
-    """``Σ val_i · x[idx_i] + c`` with at least one non-zero coefficient."""
+    """``Σ val_i · x[idx_i] + c`` with at least one non-zero coefficient (make it with :func:`lin`)."""
 
     __slots__ = ("idx", "val", "c")
 
@@ -33,36 +68,20 @@ class Lin:
 
 
 class Op:
-    """``min`` (``is_max`` False) or ``max`` of two or more children."""
+    """``min`` (``is_max`` False) or ``max`` of two or more children (make it with :func:`mk`).
+
+    ``lo_hint`` is a valid lower bound tighter than interval arithmetic, when the producer knows
+    one (set before the first :class:`IntervalBounds` query of the node)."""
 
     __slots__ = ("is_max", "kids", "lo_hint")
 
     def __init__(self, is_max: bool, kids: tuple["Tree", ...], lo_hint: float = -INF) -> None:
         self.is_max = is_max
         self.kids = kids
-        self.lo_hint = lo_hint  # a valid lower bound tighter than interval arithmetic, if known
+        self.lo_hint = lo_hint
 
     def __repr__(self) -> str:
         return f"{'max' if self.is_max else 'min'}{self.kids}"
-
-
-class Block:
-    """A vectorised leaf: a whole family of min/max structure held in arrays (e.g. every
-    vehicle–step pair of ``collision_free``). Subclasses give :meth:`bounds`, :meth:`expand`
-    (the equivalent plain tree, used under negation or arithmetic), :meth:`emit` (the encoder's
-    rows, vectorised) and :meth:`merge` (the ``min`` of several blocks of the same type)."""
-
-    __slots__ = ()
-
-    def bounds(self, lb: np.ndarray, ub: np.ndarray) -> tuple[float, float]:
-        raise NotImplementedError
-
-    def expand(self) -> "Tree":
-        raise NotImplementedError
-
-    @classmethod
-    def merge(cls, blocks: list["Block"]) -> "Block":
-        raise NotImplementedError
 
 
 Tree = Union[float, Lin, Op, Block]
@@ -136,6 +155,7 @@ def scale(t: Tree, k: float) -> Tree:
 
 
 def negate(t: Tree) -> Tree:
+    """``−t``."""
     return scale(t, -1.0)
 
 
@@ -158,10 +178,45 @@ def add(a: Tree, b: Tree) -> Tree:
     return lin(a.idx + b.idx, a.val + b.val, a.c + b.c)
 
 
-def bounds(t: Tree, lb: np.ndarray, ub: np.ndarray,
-           memo: dict[int, tuple[float, float, object]]) -> tuple[float, float]:
-    """Interval bounds of ``t`` over the box ``lb ≤ x ≤ ub`` (memoised by identity; the memo
-    keeps ``t`` alive so an identity is never reused while it is cached)."""
+# ---------------------------------------------------------------------------- analyses
+
+
+class ColumnBounds(Protocol):
+    """Anything that holds the current bounds of every column (a
+    :class:`~twolevel.milp.builder.ModelBuilder` while columns are added, a :class:`Box`)."""
+
+    @property
+    def lb(self) -> np.ndarray: ...
+
+    @property
+    def ub(self) -> np.ndarray: ...
+
+
+@dataclass(frozen=True)
+class Box:
+    """Fixed column bounds ``lb ≤ x ≤ ub``."""
+
+    lb: np.ndarray
+    ub: np.ndarray
+
+
+class IntervalBounds:
+    """Interval bounds of trees over the box of ``columns`` (read afresh at every query, so
+    columns added later count), memoised by identity; the memo keeps each tree alive so an
+    identity is never reused while it is cached. One instance is shared by the stages of one
+    encoding."""
+
+    def __init__(self, columns: ColumnBounds) -> None:
+        self.columns = columns
+        self._memo: dict[int, tuple[float, float, object]] = {}
+
+    def __call__(self, t: Tree) -> tuple[float, float]:
+        """(lowest, highest) value of ``t`` over the box."""
+        return _bounds(t, self.columns.lb, self.columns.ub, self._memo)
+
+
+def _bounds(t: Tree, lb: np.ndarray, ub: np.ndarray,
+            memo: dict[int, tuple[float, float, object]]) -> tuple[float, float]:
     if isinstance(t, float):
         return t, t
     key = id(t)
@@ -182,10 +237,28 @@ def bounds(t: Tree, lb: np.ndarray, ub: np.ndarray,
             hi += b
         res = (lo, hi)
     else:
-        bs = [bounds(k, lb, ub, memo) for k in t.kids]
+        bs = [_bounds(k, lb, ub, memo) for k in t.kids]
         los = [b[0] for b in bs]
         his = [b[1] for b in bs]
         res = (max(los), max(his)) if t.is_max else (min(los), min(his))
         res = (max(res[0], t.lo_hint), res[1])
     memo[key] = (res[0], res[1], t)
     return res
+
+
+class Parents:
+    """How many parents each :class:`Op` has in the trees built so far (by identity). Stage 1
+    counts (:meth:`add`); stage 2 encodes a node with two or more parents once, through one
+    shared variable (:meth:`shared`). Nodes counted must be kept alive by their producer."""
+
+    def __init__(self) -> None:
+        self._n: dict[int, int] = {}
+
+    def add(self, t: Tree) -> None:
+        """Count one more parent of ``t`` (nothing unless ``t`` is an :class:`Op`)."""
+        if isinstance(t, Op):
+            self._n[id(t)] = self._n.get(id(t), 0) + 1
+
+    def shared(self, t: Tree) -> bool:
+        """``t`` has two or more parents."""
+        return self._n.get(id(t), 0) >= 2

@@ -1,6 +1,6 @@
 """Diagnostic codes of the high-level controller and ``twolevel plan`` (``MIL51x``–``MIL52x``).
 
-``MIL501``–``MIL504`` (encoding) live in :mod:`twolevel.compiler.driver`. Declared once here; each
+``MIL501``–``MIL504`` (encoding) live in :mod:`twolevel.compiler.codes`. Declared once here; each
 :class:`~twolevel.diagnostics.Code` registers itself. No heavy imports.
 """
 

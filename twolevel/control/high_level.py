@@ -50,7 +50,7 @@ from twolevel.control.horizon import StepData, history_length, prepare_step
 from twolevel.control.problem import Assembled, Weights, assemble, shape_key
 from twolevel.control.template import TemplateCache, refresh, template_of
 from twolevel.diagnostics import Diagnostic, Span
-from twolevel.compiler.driver import Requirement
+from twolevel.compiler.types import Requirement
 from twolevel.milp.model import PatternCache
 from twolevel.milp.modes import ModeSearch
 from twolevel.milp.clarabel import FixedModeQP

@@ -12,7 +12,7 @@ when no line applies, so the pattern never changes); then the rules' rows (``stl
 Cost (paper): Σ_k w_u‖u_k‖² + w_du‖u_k − u_{k−1}‖² + Σ_i w_i (ζ_{k,i} − ω_{k,i})², as residuals.
 
 Signals of the trace (past samples from ``history``, then now, then k = 1..H): constants for what
-is known at solve time, :class:`~twolevel.compiler.driver.AffineSignal` for v, X, Y, ψ, δ, a, the
+is known at solve time, :class:`~twolevel.compiler.signals.AffineSignal` for v, X, Y, ψ, δ, a, the
 route progress s_k ≈ s̄_k + t̄_kᵀ(p_k − p̄_k), the lateral offset e_k ≈ n̄_kᵀ(p_k − p̄_k),
 d_stop,k = s_stop − s_k, d_light,k = s_light − s_k and d_lead,k = s_lead,k − s_k − offset.
 
@@ -32,7 +32,9 @@ import scipy.sparse as sp
 from twolevel.diagnostics import Diagnostic, Span
 from twolevel.milp.builder import ModelBuilder
 from twolevel.compiler.collision import collision_free_builtin
-from twolevel.compiler.driver import AffineSignal, Encoding, Requirement, encode
+from twolevel.compiler.driver import encode
+from twolevel.compiler.signals import AffineSignal
+from twolevel.compiler.types import Encoding, Requirement
 from twolevel.milp.model import MilpModel, PatternCache, Residuals
 from twolevel.models.params import BicycleParams
 from twolevel.control.horizon import StepData

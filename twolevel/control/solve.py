@@ -19,7 +19,7 @@ import numpy as np
 from twolevel.control.horizon import StepData
 from twolevel.control.problem import Assembled
 from twolevel.diagnostics import Span
-from twolevel.compiler.driver import AffineSignal
+from twolevel.compiler.signals import AffineSignal
 from twolevel.milp.highs import solve_highs
 from twolevel.milp.solution import Status
 from twolevel.milp.l1_surrogate import l1_surrogate

@@ -31,9 +31,12 @@ from twolevel.control.horizon import StepData
 from twolevel.control.problem import (Assembled, Weights, dynamics_values, guard_values, input_bounds, others_of,
                                       set_cost, trace_signals)
 from twolevel.compiler.affine_block import AffineBlock
+from twolevel.compiler.block import Block
 from twolevel.compiler.collision import CollisionBlock, collision_free_builtin
-from twolevel.compiler.driver import AffineSignal, Emission, Encoder, Requirement
-from twolevel.compiler.tree import Block, Op
+from twolevel.compiler.evaluator import Evaluator
+from twolevel.compiler.signals import AffineSignal, TraceSignals
+from twolevel.compiler.tree import Box, IntervalBounds, Op
+from twolevel.compiler.types import Emission, Requirement
 from twolevel.models.params import BicycleParams
 
 __all__ = ["StepTemplate", "TemplateCache", "template_of", "refresh", "signal_kinds"]
@@ -101,13 +104,6 @@ def template_of(asm: Assembled, eps: float) -> StepTemplate | None:
                         codes=np.concatenate(codes) if codes else np.zeros(0, np.int64))
 
 
-class _Bounds:
-    """What the encoder reads of a builder while evaluating trees: current column bounds."""
-
-    def __init__(self, lb: np.ndarray, ub: np.ndarray) -> None:
-        self.lb, self.ub, self.n_rows, self.disjunctions = lb, ub, 0, ()
-
-
 def refresh(tpl: StepTemplate, step: StepData, requirements: Sequence[Requirement], past: Mapping[str, np.ndarray],
             *, names: set[str], dt: float, eps: float, weights: Weights, params: BicycleParams,
             pad: float) -> Assembled | None:
@@ -127,12 +123,12 @@ def refresh(tpl: StepTemplate, step: StepData, requirements: Sequence[Requiremen
     lb[lay.u.ravel()], ub[lay.u.ravel()] = u_lo.ravel(), u_hi.ravel()
     P = lay.P
     cf = collision_free_builtin("x", "y", others_of(step, P), ids=np.asarray(step.hc.index, np.int64), pad=pad)
-    enc = Encoder(_Bounds(lb, ub), sigs, dt, length=P + 1 + H, builtins={"collision_free": cf},  # type: ignore[arg-type]
-                  stable=True)
+    ev = Evaluator(TraceSignals(sigs, P + 1 + H), dt, IntervalBounds(Box(lb, ub)), builtins={"collision_free": cf},
+                   stable=True)
     writes: list[tuple[Emission, np.ndarray, np.ndarray, np.ndarray | None]] = []
     it = iter(tpl.emissions)
     for req, kinds in zip(requirements, tpl.kinds):
-        p = _parts(enc.rob(req.formula, P, 1.0))
+        p = _parts(ev.rob(req.formula, P, 1.0))
         if p is None or p[1] < eps or tuple(_kind(b) for b in p[0]) != kinds:
             return None
         for b in p[0]:
