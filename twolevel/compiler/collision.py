@@ -33,7 +33,7 @@ def collision_free_builtin(x: str, y: str, others: np.ndarray, *, ids: np.ndarra
 
     ``others`` has shape (N, T, 2): each vehicle's predicted position per trace step [m] (NaN
     where absent). Pairs that cannot come within reach and faces that can never hold are
-    removed by the encoder's interval pruning, exactly, given the ego's position bounds.
+    removed by the compiler's interval pruning, exactly, given the ego's position bounds.
 
     Stable encoding (the compiler's ``stable`` mode): each kept pair is a disjunction of all four faces
     (faces that can never hold have their binary's upper bound set to 0), and the kept pairs are

@@ -46,8 +46,8 @@ class Disjunction:
     ``binaries[i]`` is the column of disjunct ``i``'s binary; ``rows[i]`` the big-M rows it
     enables (written ``expr − M·b ≥ −M``: relaxed when ``b = 0``); ``cover_row`` the row
     ``Σ b_i − guard ≥ 0``; ``guard`` the binary of the enclosing disjunct (−1 at top level).
-    ``label`` says where it comes from (rule, step, formula); ``sources[i]`` is the encoder's
-    description of disjunct ``i`` (for reading modes off a trajectory)."""
+    ``label`` says where it comes from (rule, step, formula); ``sources[i]`` describes disjunct
+    ``i`` for its producer (the compiler puts its robustness tree there), empty when none."""
 
     id: int
     binaries: np.ndarray
