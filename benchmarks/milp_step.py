@@ -8,15 +8,15 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
-from twolevel.milp.builder import ModelBuilder
 from twolevel.compiler.collision import collision_free_builtin, reachable_box
 from twolevel.compiler.driver import encode
 from twolevel.compiler.signals import AffineSignal
 from twolevel.compiler.types import Requirement
-from twolevel.milp.highs import solve_highs
-from twolevel.milp.model import PatternCache
+from twolevel.milp.builder import ModelBuilder
 from twolevel.milp.clarabel import FixedModeQP
+from twolevel.milp.highs import solve_highs
 from twolevel.milp.l1_surrogate import l1_surrogate
+from twolevel.milp.model import PatternCache
 from twolevel.stl import ast
 
 H, DT, VMAX = 10, 0.1, 15.0

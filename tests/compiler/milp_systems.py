@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from twolevel.milp.builder import ModelBuilder
 from twolevel.compiler.signals import AffineSignal
+from twolevel.milp.builder import ModelBuilder
 from twolevel.stl import ast
 
 DT = 0.1

@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from twolevel.milp.builder import ModelBuilder
 from twolevel.compiler.driver import encode
 from twolevel.compiler.types import Requirement
+from twolevel.milp.builder import ModelBuilder
 from twolevel.milp.highs import solve_highs
 from twolevel.milp.solution import Status
 from twolevel.monitor.robustness import robustness

@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from twolevel.milp.builder import ModelBuilder
 from twolevel.compiler.collision import collision_free_builtin, reachable_box
 from twolevel.compiler.driver import encode
 from twolevel.compiler.signals import AffineSignal
 from twolevel.compiler.types import Requirement
+from twolevel.milp.builder import ModelBuilder
 from twolevel.milp.highs import solve_highs
 from twolevel.milp.solution import Status
 from twolevel.stl import ast

@@ -19,10 +19,10 @@ stlpy = pytest.importorskip("stlpy")
 from stlpy.STL import LinearPredicate, STLTree  # noqa: E402
 from stlpy import benchmarks as bm  # noqa: E402
 
-from twolevel.milp.builder import ModelBuilder  # noqa: E402
 from twolevel.compiler.driver import encode  # noqa: E402
 from twolevel.compiler.signals import AffineSignal  # noqa: E402
 from twolevel.compiler.types import Requirement  # noqa: E402
+from twolevel.milp.builder import ModelBuilder  # noqa: E402
 from twolevel.milp.highs import solve_highs  # noqa: E402
 from twolevel.milp.solution import Status  # noqa: E402
 from twolevel.stl import ast  # noqa: E402

@@ -6,14 +6,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from twolevel.milp.builder import ModelBuilder
 from twolevel.compiler.driver import encode
 from twolevel.compiler.types import Requirement
-from twolevel.milp.highs import CAPABILITIES as HIGHS, solve_highs, write_model
-from twolevel.milp.model import PatternCache
+from twolevel.milp.builder import ModelBuilder
 from twolevel.milp.clarabel import CAPABILITIES as CLARABEL, FixedModeQP
-from twolevel.milp.solution import Status
+from twolevel.milp.highs import CAPABILITIES as HIGHS, solve_highs, write_model
 from twolevel.milp.l1_surrogate import l1_surrogate
+from twolevel.milp.model import PatternCache
+from twolevel.milp.solution import Status
 from twolevel.stl import ast
 
 from milp_systems import DT, H, PAST, double_integrator

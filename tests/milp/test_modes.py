@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from milp_systems import DT, H, T, double_integrator, random_formula
-from twolevel.milp.builder import ModelBuilder
 from twolevel.compiler.driver import encode
 from twolevel.compiler.types import Requirement
+from twolevel.milp.builder import ModelBuilder
+from twolevel.milp.clarabel import FixedModeQP
 from twolevel.milp.highs import solve_highs
 from twolevel.milp.modes import ModeSearch, ModeStatus
-from twolevel.milp.clarabel import FixedModeQP
 from twolevel.milp.solution import Status
 
 

@@ -45,15 +45,15 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from twolevel.compiler.types import Requirement
 from twolevel.control.codes import MIL510, MIL511, MIL512
 from twolevel.control.horizon import StepData, history_length, prepare_step
 from twolevel.control.problem import Assembled, Weights, assemble, shape_key
 from twolevel.control.template import TemplateCache, refresh, template_of
 from twolevel.diagnostics import Diagnostic, Span
-from twolevel.compiler.types import Requirement
+from twolevel.milp.clarabel import FixedModeQP
 from twolevel.milp.model import PatternCache
 from twolevel.milp.modes import ModeSearch
-from twolevel.milp.clarabel import FixedModeQP
 from twolevel.milp.solution import Status
 from twolevel.models import bicycle
 from twolevel.models.params import BicycleParams

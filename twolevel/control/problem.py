@@ -29,12 +29,12 @@ from typing import Mapping, Sequence
 import numpy as np
 import scipy.sparse as sp
 
-from twolevel.diagnostics import Diagnostic, Span
-from twolevel.milp.builder import ModelBuilder
 from twolevel.compiler.collision import collision_free_builtin
 from twolevel.compiler.driver import encode
 from twolevel.compiler.signals import AffineSignal
 from twolevel.compiler.types import Encoding, Requirement
+from twolevel.diagnostics import Diagnostic, Span
+from twolevel.milp.builder import ModelBuilder
 from twolevel.milp.model import MilpModel, PatternCache, Residuals
 from twolevel.models.params import BicycleParams
 from twolevel.control.horizon import StepData

@@ -16,13 +16,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from twolevel.compiler.signals import AffineSignal
 from twolevel.control.horizon import StepData
 from twolevel.control.problem import Assembled
 from twolevel.diagnostics import Span
-from twolevel.compiler.signals import AffineSignal
 from twolevel.milp.highs import solve_highs
-from twolevel.milp.solution import Status
 from twolevel.milp.l1_surrogate import l1_surrogate
+from twolevel.milp.solution import Status
 
 if TYPE_CHECKING:
     from twolevel.control.high_level import HighLevelController, PlanResult
