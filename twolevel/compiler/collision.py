@@ -35,11 +35,11 @@ def collision_free_builtin(x: str, y: str, others: np.ndarray, *, ids: np.ndarra
     where absent). Pairs that cannot come within reach and faces that can never hold are
     removed by the compiler's interval pruning, exactly, given the ego's position bounds.
 
-    Stable encoding (the compiler's ``stable`` mode): each kept pair is a disjunction of all four faces
-    (faces that can never hold have their binary's upper bound set to 0), and the kept pairs are
-    those that can come within ``d + pad`` [m] (``pad`` ≥ 0: a margin so that the same structure
-    serves the next steps), or, when ``keep`` is given, the pairs whose code is in ``keep`` plus
-    every pair that can come within d. A pair's code is ``step·2³² + ids[i]`` (``ids``: a stable
+    Stable encoding (the compiler's ``stable`` mode): each kept pair is a disjunction of all four
+    faces (faces that can never hold have their binary's upper bound set to 0), and the kept
+    pairs are those that can come within ``d + pad`` [m] (``pad`` ≥ 0: a margin so that the same
+    structure serves the next steps), or, when ``keep`` is given, the pairs whose code is in
+    ``keep`` plus every pair that can come within d. A pair's code is ``step·2³² + ids[i]`` (``ids``: a stable
     identity per vehicle, default its row); pairs are emitted in code order."""
     others = np.asarray(others, dtype=float)
     vid = np.arange(others.shape[0], dtype=np.int64) if ids is None else np.asarray(ids, np.int64)
@@ -156,7 +156,8 @@ class CollisionBlock(Block):
         self.tb, self.idx, self.d = tb, idx, d
         self._cache: tuple | None = None
 
-    def _arr(self) -> tuple[np.ndarray, ...]:
+    def arrays(self) -> tuple[np.ndarray, ...]:
+        """Per pair: ego x column, x coefficient, x offset, the same for y, step, vehicle row."""
         if self._cache is None:
             tb, i = self.tb, self.idx
             self._cache = (tb.xc[i], tb.xa[i], tb.xo[i], tb.yc[i], tb.ya[i], tb.yo[i], tb.step[i], tb.veh[i])
@@ -171,7 +172,7 @@ class CollisionBlock(Block):
                    np.concatenate([b.d for b in blocks]))  # type: ignore[attr-defined]
 
     def _ranges(self, lb: np.ndarray, ub: np.ndarray) -> tuple[np.ndarray, ...]:
-        xc, xa, xo, yc, ya, yo, _, _ = self._arr()
+        xc, xa, xo, yc, ya, yo, _, _ = self.arrays()
         a1, a2 = xa * lb[xc], xa * ub[xc]
         b1, b2 = ya * lb[yc], ya * ub[yc]
         return (np.minimum(a1, a2) + xo, np.maximum(a1, a2) + xo,
@@ -184,7 +185,7 @@ class CollisionBlock(Block):
         return float(np.min(lo - self.d)), float(np.min(hi - self.d))
 
     def expand(self) -> Tree:
-        xc, xa, xo, yc, ya, yo, _, _ = self._arr()
+        xc, xa, xo, yc, ya, yo, _, _ = self.arrays()
         pairs: list[Tree] = []
         for i in range(xc.size):
             dx = lin((int(xc[i]),), (float(xa[i]),), float(xo[i]))
@@ -207,7 +208,7 @@ class CollisionBlock(Block):
             return None
         pad, keep0 = self.tb.opts
         keep = keep0 if keep is None else keep
-        xc, xa, xo, yc, ya, yo, _, _ = self._arr()
+        xc, xa, xo, yc, ya, yo, _, _ = self.arrays()
         xlo, xhi, ylo, yhi = self._ranges(lb, ub)
         d = self.d[:, None]
         f_hi = np.where(_FA > 0, xhi[:, None], -xlo[:, None]) + np.where(_FB > 0, yhi[:, None], -ylo[:, None]) - d
@@ -240,7 +241,7 @@ class CollisionBlock(Block):
             if lay is not None:
                 self._emit_stable(sink, lay)
                 return
-        xc, xa, xo, yc, ya, yo, step, veh = self._arr()
+        xc, xa, xo, yc, ya, yo, step, veh = self.arrays()
         xlo, xhi, ylo, yhi = self._ranges(sink.lb, sink.ub)
         d = self.d[:, None]
         # face f: a·dx + b·dy − d; its bounds over the box
@@ -319,7 +320,7 @@ class StableLayout:
 def _merge_tables(blocks: list[Block]) -> CollisionBlock:
     """Blocks from different tables (two collision_free calls): one table of their pairs."""
     tb = _PairTable()
-    parts = [b._arr() for b in blocks]  # type: ignore[attr-defined]
+    parts = [b.arrays() for b in blocks]  # type: ignore[attr-defined]
     for k, name in enumerate(("xc", "xa", "xo", "yc", "ya", "yo", "step", "veh")):
         setattr(tb, name, np.concatenate([p[k] for p in parts]))
     tb.ok_t = np.zeros(0, bool)
