@@ -32,6 +32,8 @@ YML419 = Code("YML419", "reference-cycle", E, "Files that extend each other in a
 YML420 = Code("YML420", "bad-geometry", E, "A position or route that does not fit the map's geometry.")
 YML421 = Code("YML421", "population-crowded", W, "A population could not place all its vehicles.")
 YML422 = Code("YML422", "not-a-mapping", E, "The document is not a mapping of keys to values.")
+YML423 = Code("YML423", "assumption-tighter", W,
+              "An assumption about other road users tighter than its documented default (the guarantee covers less).")
 
 __all__ = [name for name in dir() if name.startswith("YML")]
 

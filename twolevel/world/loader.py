@@ -23,6 +23,7 @@ from pydantic import BaseModel, ValidationError
 from twolevel.diagnostics import Diagnostic, Span
 from twolevel.world.codes import (
     YML410, YML411, YML412, YML413, YML414, YML415, YML416, YML417, YML418, YML419, YML420, YML421,
+    YML423,
 )
 from twolevel.world.document import Document, Path_, read_document
 from twolevel.world.schema import MapFile, ScenarioFile, lane_length
@@ -426,6 +427,35 @@ def _check_scenario(spec: ScenarioFile, doc: Document, m: MapFile) -> list[Diagn
                                   hint=_suggest(lane, lengths)))
     out += _check_ids(ids[1:], doc, "participant")
     out += _check_vehicle(spec, doc)
+    out += _check_assumptions(spec, doc, [i for i, _ in ids[1:]])
+    return out
+
+
+def _check_assumptions(spec: ScenarioFile, doc: Document, known: list[str]) -> list[Diagnostic]:
+    """``assumptions.road_users`` names participants or populations (YML416); a bound tighter
+    than its documented default is a warning (YML423): the guarantee then covers fewer of the
+    behaviours others may show (twolevel/safety/assumptions.py decides what is tighter)."""
+    from twolevel.safety.assumptions import tighter_than_default
+
+    a = spec.assumptions
+    if a is None:
+        return []
+    out: list[Diagnostic] = []
+    for name in a.road_users:
+        if name not in known:
+            out.append(YML416(f"no participant or population '{name}' in the scenario",
+                              doc.locate(("assumptions", "road_users", name)),
+                              hint=_suggest(name, known) or "keys are participant ids or population ids"))
+    for kind in ("vehicle", "cyclist", "pedestrian", "response"):
+        section = getattr(a, kind)
+        if section is None:
+            continue
+        given = {k: getattr(section, k) for k in type(section).model_fields}
+        for name, value, default in tighter_than_default(kind, given):
+            out.append(YML423(f"assumption '{kind}.{name}' = {value!r} is tighter than the default {default!r}",
+                              doc.locate(("assumptions", kind, name), value=True),
+                              hint="others may do more than assumed here; the safety guarantee covers only what "
+                                   "is assumed (defaults and sources: twolevel/safety/assumptions.py)"))
     return out
 
 

@@ -25,6 +25,7 @@ __all__ = [
     "LightStep", "TrafficLight", "MapFile", "LanePos", "Placement", "Box", "Ego", "RouteSpec",
     "IDMParams", "Waypoint", "Participant", "Population", "RuleRef", "ControllerSettings",
     "RunSettings", "ScenarioFile", "segment_length", "lane_length", "KMH",
+    "UserBoundsSpec", "PedestrianBoundsSpec", "ResponseSpec", "AssumptionsSpec",
 ]
 
 KMH = 1.0 / 3.6  # [m/s] per km/h
@@ -339,6 +340,52 @@ class RunSettings(_Model):
     seed: int = Field(default=0, ge=0, description="seed of every random choice")
 
 
+_ASSUMPTIONS = "defaults and sources: twolevel/safety/assumptions.py"
+
+
+def _bound(gt: float, le: float, what: str) -> Any:
+    return Field(default=None, gt=gt, le=le, allow_inf_nan=False, description=what)
+
+
+class UserBoundsSpec(_Model):
+    """Assumed bounds of vehicles or cyclists; what is left out keeps its default."""
+
+    v_max: float | None = _bound(0, 150, "speed bound [m/s]; default vehicle 83.33, cyclist 12.5")
+    speed_factor: float | None = _bound(0, 10, "v ≤ speed_factor · limit in force [-]; default vehicle 1.2, cyclist none")
+    a_max: float | None = _bound(0, 30, "largest |acceleration|, braking and driving [m/s²]; default vehicle 8, cyclist 6")
+    v_switch: float | None = _bound(0, 100, "above it drive acceleration ≤ a_max·v_switch/v [m/s]; default 7.319, cyclist 2")
+    lane_changes: bool | None = Field(default=None, description="may move to parallel lanes of its direction; default true")
+    stop_lines: bool | None = Field(default=None, description="stops at stop signs' lines it can stop for; default true")
+    red_lights: bool | None = Field(default=None, description="does not cross a red light it can stop for; default true")
+
+
+class PedestrianBoundsSpec(_Model):
+    """Assumed bounds of pedestrians (any heading, not lane-bound)."""
+
+    v_max: float | None = _bound(0, 15, "speed bound [m/s]; default 2")
+    a_max: float | None = _bound(0, 15, "largest |acceleration| [m/s²]; default 0.6")
+
+
+class ResponseSpec(_Model):
+    """RSS's response of other road users (followers keep this distance behind the ego)."""
+
+    time: float | None = _bound(0, 10, "response time ρ [s]; default 2")
+    accel_max: float | None = _bound(0, 30, "acceleration during the response [m/s²]; default 3.5")
+    brake_min: float | None = _bound(0, 30, "braking at least, after the response [m/s²]; default 4")
+    brake_max: float | None = _bound(0, 30, "braking at most of the vehicle ahead [m/s²]; default 8")
+
+
+class AssumptionsSpec(_Model):
+    """What the safety layer assumes of other road users (its guarantee holds while they keep it)."""
+
+    vehicle: UserBoundsSpec | None = Field(default=None, description=f"vehicles' bounds ({_ASSUMPTIONS})")
+    cyclist: UserBoundsSpec | None = Field(default=None, description=f"cyclists' bounds ({_ASSUMPTIONS})")
+    pedestrian: PedestrianBoundsSpec | None = Field(default=None, description=f"pedestrians' bounds ({_ASSUMPTIONS})")
+    response: ResponseSpec | None = Field(default=None, description="RSS response {time [s], accel_max, brake_min, brake_max [m/s²]}")
+    road_users: dict[str, Literal["vehicle", "cyclist", "pedestrian"]] = Field(
+        default_factory=dict, description="participant or population id → vehicle, cyclist or pedestrian (default vehicle)")
+
+
 class ScenarioFile(_Model):
     """A scenario: map, ego, route, other traffic, rules, controller and run settings."""
 
@@ -353,6 +400,7 @@ class ScenarioFile(_Model):
     rules: list[RuleRef] = Field(default_factory=list, description="rule files and constant bindings")
     controller: ControllerSettings = Field(default_factory=ControllerSettings, description="controller settings")
     run: RunSettings = Field(default_factory=RunSettings, description="run settings")
+    assumptions: AssumptionsSpec | None = Field(default=None, description="assumptions about other road users (safety layer)")
 
 
 # ------------------------------------------------ pure-Python lengths (no numpy: check path)

@@ -8,12 +8,13 @@ the seed) and their initial state. Everything here is frozen dataclasses and num
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Mapping
 
 import numpy as np
 
+from twolevel.safety.assumptions import Assumptions, from_spec
 from twolevel.world.geometry import Lane, LaneSet, Route, concatenate, lane_from_reference, resample, sample_road
 from twolevel.world.loader import Scenario, _route_lanes, successors
 from twolevel.world.schema import ControllerSettings, IDMParams, MapFile, Placement, Population
@@ -78,6 +79,7 @@ class World:
     route_stop_index: np.ndarray  # (J,) index into ``stops``
     route_lights: np.ndarray  # (Q,) route s [m] of light stop lines on the route
     route_light_index: np.ndarray  # (Q,) index into ``lights``
+    assumptions: Assumptions = field(default_factory=Assumptions)  # about other road users (safety layer)
 
 
 def build_lanes(spec: MapFile) -> tuple[LaneSet, dict[str, int]]:
@@ -255,7 +257,8 @@ def build_world(scn: Scenario) -> World:
     rl = route.from_lane(lights.lane, lights.s)
     on_s, on_l = np.flatnonzero(~np.isnan(rs)), np.flatnonzero(~np.isnan(rl))
     return World(spec.name or scn.path, lanes, route, limits, lights, stops, parts, traffic0, ego, settings,
-                 tuple((r.path, r.constants) for r in scn.rules), rs[on_s], on_s, rl[on_l], on_l)
+                 tuple((r.path, r.constants) for r in scn.rules), rs[on_s], on_s, rl[on_l], on_l,
+                 from_spec(spec.assumptions))
 
 
 def load_rulesets(world: World) -> tuple[list, list]:
