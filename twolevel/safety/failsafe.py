@@ -1,0 +1,227 @@
+"""Fail-safe trajectories of the ego on the detailed four-wheel model: brake to standstill along
+the route, or clear a conflict zone first, then brake.
+
+A fail-safe is a sequence of actuator commands [δ [rad], γ [-]] per control step from a given
+detailed state, with the states the detailed model (:mod:`twolevel.models.rollout`, the plant's
+own equations and parameters) goes through under it, until the car stands (speed ≤
+``v_stop``). Replayed from the same state with the same parameters it reproduces these states,
+so what is executed is what was verified; after its last command the car holds the brake
+(:meth:`FailSafe.control_at`).
+
+**Manoeuvres** (:func:`manoeuvres`), in the order the verifier tries them:
+
+* ``brake`` at a few deceleration levels, the gentlest first: RSS's ``brake_min`` (4 m/s², what
+  a follower may expect of the car ahead; no fail-safe brakes more gently, so a car that cuts in
+  leaving RSS's distance is always one the fail-safe stops for), a firmer level, then full
+  braking (γ = −1, ≈ 9.3 m/s² on dry tarmac, the tyres' limit);
+* ``clear`` when a conflict zone (a stretch of the route that crosses or merges with another
+  lane, :attr:`~twolevel.safety.network.Network.zones`) lies within the braking distance or the
+  car is in one: keep the speed (or gain some, from standstill too) until the car's centre is
+  past the zone's end by ``clear_margin``, then brake. A car already inside a junction leaves it.
+
+**Steering** follows the route: the curvature along the manoeuvre's speed profile as feed-
+forward (δ = atan(wheelbase · κ)), plus a correction of the heading and lateral errors at the
+start (Stanley's law, faded out over a second), bounded by a lateral acceleration ``a_lat_max``
+at speed. The whole fail-safe is one deterministic function of the start state.
+
+Batched over manoeuvres (one compiled rollout per chunk for all of them). Units: m, s, m/s,
+m/s², rad.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from twolevel.models.actuation import gamma_from_accel
+from twolevel.models.params import VehicleParams
+from twolevel.models.rollout import Backend, rollout
+from twolevel.world.geometry import Route
+
+__all__ = ["FailSafeSettings", "Manoeuvre", "FailSafe", "manoeuvres", "roll", "brake_rate", "FULL"]
+
+FULL = math.inf
+"""Deceleration level meaning full braking (γ = −1)."""
+
+
+@dataclass(frozen=True)
+class FailSafeSettings:
+    """``decels`` [m/s²]: braking levels, gentlest first (:data:`FULL`: γ = −1); ``clear_accels``
+    [m/s²]: accelerations while clearing a zone (0 keeps the speed); ``clear_brakes`` [m/s²]: the
+    braking after clearing; ``clear_margin`` [m]; ``v_stop`` [m/s]: standing; ``max_time`` [s]: a fail-safe that has not stopped by then
+    fails; Stanley gains ``k_heading`` [-] and ``k_lateral`` [1/s] (over speed); ``a_lat_max``
+    [m/s²] bounds the steering at speed; ``delta_max`` [rad]."""
+
+    decels: tuple[float, ...] = (4.0, 6.0, FULL)
+    clear_accels: tuple[float, ...] = (0.0, 1.5)
+    clear_brakes: tuple[float, ...] = (4.0, FULL)
+    clear_margin: float = 1.0
+    v_stop: float = 0.05
+    max_time: float = 30.0
+    k_heading: float = 1.0
+    k_lateral: float = 1.5
+    a_lat_max: float = 4.0
+    delta_max: float = 0.5
+
+
+@dataclass(frozen=True)
+class Manoeuvre:
+    """One fail-safe to try: ``decel`` [m/s²] braking level (:data:`FULL`), and for a clearing
+    one the acceleration ``clear_accel`` [m/s²] held until the centre passes route position
+    ``s_clear`` [m] (None: brake from the start)."""
+
+    decel: float
+    clear_accel: float | None = None
+    s_clear: float = -math.inf
+
+    @property
+    def name(self) -> str:
+        """A short label: ``brake 4``, ``brake full``, ``clear +1.5 to 84.0 m, brake 4``."""
+        b = "full" if math.isinf(self.decel) else f"{self.decel:g}"
+        if self.clear_accel is None:
+            return f"brake {b}"
+        return f"clear {self.clear_accel:+g} to {self.s_clear:.1f} m, brake {b}"
+
+
+@dataclass(frozen=True, eq=False)
+class FailSafe:
+    """A fail-safe: ``controls`` (N, 2) [δ rad, γ] per step of ``dt`` [s] from ``states[0]``,
+    ``states`` (N+1, 12) of the detailed model, whether it ``stopped`` (speed ≤ v_stop at the end)
+    and the manoeuvre it executes."""
+
+    manoeuvre: Manoeuvre
+    controls: np.ndarray
+    states: np.ndarray
+    dt: float
+    stopped: bool
+    hold: np.ndarray = field(default_factory=lambda: np.array([0.0, -1.0]))
+
+    @property
+    def name(self) -> str:
+        return self.manoeuvre.name
+
+    @property
+    def steps(self) -> int:
+        """Number of commands N."""
+        return len(self.controls)
+
+    @property
+    def t_stop(self) -> float:
+        """Time from the start to standstill [s] (N · dt)."""
+        return self.steps * self.dt
+
+    def control_at(self, k: int) -> np.ndarray:
+        """The command [δ, γ] at step k ≥ 0 from the start; after the last, the held brake."""
+        return self.controls[k].copy() if k < self.steps else self.hold.copy()
+
+
+def manoeuvres(settings: FailSafeSettings, zones: np.ndarray, s0: float, v0: float, brake_full: float) -> list[Manoeuvre]:
+    """The manoeuvres to try from route position ``s0`` [m] at speed ``v0`` [m/s], in order:
+    each braking level, then clearing the first conflict zone (``zones`` (Z, 2) [m] of the centre)
+    that the car is in or cannot be sure to stop before (its gentlest braking distance reaches
+    it), with ``brake_full`` [m/s²] the full-braking deceleration."""
+    out = [Manoeuvre(d) for d in settings.decels]
+    gentle = min(settings.decels) if settings.decels else brake_full
+    reach = s0 + v0**2 / (2 * min(gentle, brake_full)) + 1.0
+    ahead = [z for z in np.asarray(zones).reshape(-1, 2) if z[1] >= s0 and z[0] <= reach]
+    if ahead:
+        s_clear = float(ahead[0][1]) + settings.clear_margin
+        out += [Manoeuvre(b, a, s_clear) for b in settings.clear_brakes for a in settings.clear_accels
+                if not (a <= 0 and v0 < 0.5)]  # keeping a standstill clears nothing
+    return out
+
+
+def _wrap(a: np.ndarray) -> np.ndarray:
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+@functools.lru_cache(maxsize=16)
+def brake_rate(params: VehicleParams) -> float:
+    """Full braking's deceleration [m/s²] (γ = −1, quasi-static, at low speed)."""
+    from twolevel.models.actuation import accel_from_gamma
+
+    return float(-accel_from_gamma(-1.0, 0.0, params))
+
+
+def roll(x0: np.ndarray, plan: list[Manoeuvre], route: Route, s0: float, dt: float, params: VehicleParams,
+         settings: FailSafeSettings = FailSafeSettings(), backend: Backend = "auto") -> list[FailSafe]:
+    """The fail-safes of the manoeuvres ``plan`` from the detailed state ``x0`` (12,) (or one
+    state per manoeuvre, (K, 12)), the ego's centre being near route position ``s0`` [m] (or
+    (K,)), where its projection is searched.
+
+    All manoeuvres are rolled out together in segments: each segment's commands are planned from
+    its start state (the speed and route position profile of the manoeuvre, steering from the
+    curvature along it and the errors at the start), as long as the manoeuvre needs to stop by
+    that profile (rounded up to whole seconds, so that few compiled rollouts serve all lengths);
+    a manoeuvre that has not stopped by the end of a segment gets another one."""
+    K = len(plan)
+    if K == 0:
+        return []
+    st = settings
+    full = brake_rate(params)
+    decel = np.array([full if math.isinf(m.decel) else m.decel for m in plan])
+    is_full = np.array([math.isinf(m.decel) for m in plan])
+    clear_a = np.array([np.nan if m.clear_accel is None else m.clear_accel for m in plan])
+    s_clear = np.array([m.s_clear for m in plan])
+    L = params.wheelbase
+    n_max = int(math.ceil(st.max_time / dt))
+    bucket = max(1, int(round(1.0 / dt)))
+    x = np.array(np.broadcast_to(np.asarray(x0, dtype=float), (K, 12)))
+    states, controls = [x[:, None, :]], []
+    s_hint = np.array(np.broadcast_to(np.asarray(s0, dtype=float), (K,)))
+    stop_at = np.full(K, -1)
+    done = 0
+    while done < n_max and (stop_at < 0).any():
+        v = np.maximum(x[:, 3], 0.0)
+        s, e = route.project_near(x[:, :2], s_hint, 5.0 + float(v.max()) * dt)
+        e_psi = _wrap(x[:, 2] - route.heading_at(s))
+        # the profile: clear (hold clear_a until s_clear), then brake at decel to standstill
+        clearing = ~np.isnan(clear_a) & (s < s_clear)
+        ca = np.nan_to_num(clear_a)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t_c = np.where(clearing, np.where(np.abs(ca) > 1e-9,
+                                              (-v + np.sqrt(np.maximum(v**2 + 2 * ca * (s_clear - s), 0.0))) / ca,
+                                              (s_clear - s) / np.maximum(v, 1e-3)), 0.0)
+        t_c = np.minimum(np.nan_to_num(t_c, nan=st.max_time, posinf=st.max_time), st.max_time)
+        v_c = v + ca * t_c * clearing
+        need = t_c + v_c / decel + 2 * dt
+        n = int(min(n_max - done, bucket * math.ceil(float(need[stop_at < 0].max()) / (bucket * dt) + 1e-9)))
+        n = max(n, 1)
+        tk = dt * np.arange(n)[None, :]
+        in_clear = clearing[:, None] & (tk < t_c[:, None])
+        tb = np.maximum(tk - t_c[:, None], 0.0)
+        v_pred = np.where(in_clear, v[:, None] + ca[:, None] * tk, np.maximum(v_c[:, None] - decel[:, None] * tb, 0.0))
+        s_c = s + v * t_c + 0.5 * ca * clearing * t_c**2
+        tb_stop = np.minimum(tb, v_c[:, None] / decel[:, None])
+        s_pred = np.where(in_clear, s[:, None] + v[:, None] * tk + 0.5 * ca[:, None] * tk**2,
+                          s_c[:, None] + v_c[:, None] * tb_stop - 0.5 * decel[:, None] * tb_stop**2)
+        a_k = np.where(in_clear, ca[:, None], -decel[:, None])
+        gamma = np.where(is_full[:, None] & ~in_clear, -1.0, gamma_from_accel(a_k, v_pred, params))
+        # steering: curvature along the profile + Stanley's correction, faded out over a second
+        ff = np.arctan(L * route.curvature_at(np.minimum(s_pred, route.s[-1])))
+        fade = np.clip(1.0 - tk / 1.0, 0.0, 1.0)
+        fb = -(st.k_heading * e_psi + np.arctan2(st.k_lateral * e, v + 1.0))
+        bound = np.minimum(st.delta_max, np.arctan(st.a_lat_max * L / np.maximum(v_pred**2, 1e-6)))
+        delta = np.clip(ff + fb[:, None] * fade, -bound, bound)
+        u = np.stack([delta, gamma], axis=-1)  # (K, n, 2)
+        u[stop_at >= 0] = np.array([0.0, -1.0])  # stopped ones hold the brake
+        ro = rollout(x, u, dt, params, backend).states  # (K, n+1, 12)
+        controls.append(u)
+        states.append(ro[:, 1:])
+        stopped = ro[:, 1:, 3] <= st.v_stop
+        first = np.where(stopped.any(axis=1), stopped.argmax(axis=1), -1)
+        new = (stop_at < 0) & (first >= 0)
+        stop_at = np.where(new, done + first + 1, stop_at)
+        x = ro[:, -1]
+        s_hint = s_pred[:, -1]
+        done += n
+    U = np.concatenate(controls, axis=1)
+    X = np.concatenate(states, axis=1)
+    out = []
+    for k, m in enumerate(plan):  # a handful of manoeuvres
+        n = int(stop_at[k]) if stop_at[k] >= 0 else done
+        out.append(FailSafe(m, U[k, :n].copy(), X[k, : n + 1].copy(), dt, bool(stop_at[k] >= 0)))
+    return out

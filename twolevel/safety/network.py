@@ -1,0 +1,372 @@
+"""The map as the safety layer reads it: lane groups, lane trees, cells, stop lines, conflict zones.
+
+Built once per world (:func:`network_of` caches it) from the sampled lanes of
+:class:`~twolevel.world.geometry.LaneSet`:
+
+* **Lane groups** — lanes of one road that run the same way are exact parallel offsets of its
+  reference line (same vertices shifted along the normals), so a lane change moves between
+  members of a group at the same arc-length coordinate. ``dlat[i]`` is lane i's lateral offset
+  [m] (+ left of travel) from its group's first lane.
+* **Lane trees** — from each lane, every way forward along successors (every branch through a
+  junction) up to :data:`REACH` metres: nodes ``(ref lane, offset)`` where the ref lane's s = 0
+  lies ``offset`` [m] along the path from the root lane's s = 0. Two kinds: lane-bound users who
+  keep their lane (members = the lane itself) and users who may change lanes (members = the
+  lane's group, successors of every member). A node's ``natural`` lane is the one reached
+  without changing lanes (−1 when there is none).
+* **Cells** — each lane cut into convex pieces (heading monotone, turning ≤ :data:`CELL_TURN`,
+  at most :data:`CELL_LENGTH` long) for turning a longitudinal interval into convex polygons.
+* **Lines** — stop signs and traffic lights by lane (and on each tree node, their position along
+  the path).
+* **Conflict zones** — the parts of other lanes the ego's route crosses or merges with: polygons
+  of every lane others may come along (not the route's, not one entered only from the route's,
+  which branches off ahead of the ego), for the invariably-safe test at standstill, and the
+  route intervals [s_in, s_out] [m] over which the ego's body, centred on the route, overlaps
+  them.
+
+Units: m, rad, m/s. Everything here is numpy arrays in frozen dataclasses.
+"""
+
+from __future__ import annotations
+
+import math
+import weakref
+from dataclasses import dataclass
+
+import numpy as np
+
+from twolevel.safety.polygons import band_pieces, overlaps
+from twolevel.world.world import World
+
+__all__ = ["Network", "LaneTrees", "network_of", "REACH", "CELL_TURN", "CELL_LENGTH", "STOP_SIGN", "LIGHT"]
+
+REACH = 1500.0
+"""Depth of the lane trees [m] (a participant whose reach goes beyond is predicted freely)."""
+MAX_NODES = 256
+"""Nodes per lane tree at most (a branching network deeper than this is cut; see REACH)."""
+CELL_TURN = 0.08
+"""Largest heading change within a cell [rad]."""
+CELL_LENGTH = 50.0
+"""Longest cell [m]."""
+STOP_SIGN, LIGHT = 0, 1
+_MAX_LINES = 4  # lines per lane kept on a tree node
+
+
+@dataclass(frozen=True, eq=False)
+class LaneTrees:
+    """Every lane's tree, concatenated: the nodes of lane l's tree are ``ptr[l]:ptr[l+1]``
+    (root first, parents before children). Per node: ``ref`` lane, ``natural`` lane (−1),
+    ``offset`` [m], ``parent`` (index within the same tree, −1 for the root), ``depth`` (0 at the
+    root), ``leaf`` (the ref
+    lane has no successor: the band continues straight past its end), ``members`` (N, M) lanes
+    (−1 padded) with their lateral offset ``dlat`` (N, M) [m] from the ref lane, and the lines on
+    each member ``line`` (N, M, K) (index into :attr:`Network.line_kind`, −1 padded) at path
+    position ``line_x`` (N, M, K) [m]. Per tree: the largest speed limit on it ``limit`` (L,)
+    [m/s], the extremes of d(ref s)/d(member s) over its members ``stretch``/``shrink`` (L,) [-]
+    (a member lane on the inside of a bend is shorter than the ref lane), its ``extent`` (L,) [m]
+    (path length covered; +inf when every branch ends on the map)."""
+
+    ptr: np.ndarray
+    ref: np.ndarray
+    natural: np.ndarray
+    offset: np.ndarray
+    parent: np.ndarray
+    depth: np.ndarray
+    leaf: np.ndarray
+    members: np.ndarray
+    dlat: np.ndarray
+    line: np.ndarray
+    line_x: np.ndarray
+    limit: np.ndarray
+    stretch: np.ndarray
+    shrink: np.ndarray
+    extent: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class Network:
+    """The road network for prediction and verification (see the module docstring).
+
+    ``group`` (L,) group id of each lane, ``dlat`` (L,) [m] offset in its group; ``keep`` and
+    ``change``: the lane trees without and with lane changes; cells ``cell_ptr`` (L+1,),
+    ``cell_s0``/``cell_s1`` (C,) [m], ``cell_turn`` (C,) [rad], ``cell_key`` (C,) the start's
+    global key (the lane set's ``base`` + s0, sorted); lines ``line_kind`` (Q,)
+    (:data:`STOP_SIGN` or :data:`LIGHT`), ``line_index`` (Q,) into the world's stops or lights,
+    ``line_lane`` (Q,), ``line_s`` (Q,) [m]; ``route_lanes``: lane indices the route runs along;
+    ``foreign`` (F, 4, 2) [m]: quads covering every other lane near the route (shrunk by
+    ``FOREIGN_TOLERANCE``), ``foreign_lane`` (F,); ``zones`` (Z, 2) [m]: route intervals where
+    the ego centred on the route overlaps one of them."""
+
+    world: World
+    group: np.ndarray
+    dlat: np.ndarray
+    keep: LaneTrees
+    change: LaneTrees
+    cell_ptr: np.ndarray
+    cell_s0: np.ndarray
+    cell_s1: np.ndarray
+    cell_turn: np.ndarray
+    cell_key: np.ndarray
+    line_kind: np.ndarray
+    line_index: np.ndarray
+    line_lane: np.ndarray
+    line_s: np.ndarray
+    route_lanes: frozenset[int]
+    foreign: np.ndarray
+    foreign_lane: np.ndarray
+    zones: np.ndarray
+
+    def trees(self, lane_changes: bool) -> LaneTrees:
+        """The lane trees of users who may (or may not) change lanes."""
+        return self.change if lane_changes else self.keep
+
+
+FOREIGN_TOLERANCE = 0.05
+"""Overlap with another lane [m] a standing ego may have (a touching box is not inside)."""
+
+_CACHE: "weakref.WeakKeyDictionary[World, Network]" = weakref.WeakKeyDictionary()
+
+
+def network_of(world: World) -> Network:
+    """The :class:`Network` of a world (built on first use, then cached)."""
+    got = _CACHE.get(world)
+    if got is None:
+        got = _build(world)
+        _CACHE[world] = got
+    return got
+
+
+# ------------------------------------------------------------------------------ groups
+
+
+def _groups(world: World) -> tuple[np.ndarray, np.ndarray]:
+    """Group id and lateral offset [m] from the group's first lane, for every lane: lanes that
+    are parallel offsets of each other (same vertices along the normals, same direction)."""
+    lanes = world.lanes.lanes
+    n = len(lanes)
+    group = np.arange(n)
+    dlat = np.zeros(n)
+    for i in range(n):
+        if group[i] != i:
+            continue
+        a = lanes[i]
+        tangent = np.stack([np.cos(a.heading), np.sin(a.heading)], axis=1)
+        for j in range(i + 1, n):
+            b = lanes[j]
+            if group[j] != j or len(b.points) != len(a.points) or np.max(np.abs(b.heading - a.heading)) > 1e-9:
+                continue
+            rel = b.points - a.points
+            along = np.einsum("kj,kj->k", rel, tangent)
+            side = tangent[:, 0] * rel[:, 1] - tangent[:, 1] * rel[:, 0]
+            if np.max(np.abs(along)) < 1e-6 and np.ptp(side) < 1e-6:
+                group[j] = i
+                dlat[j] = float(side[0])
+    return group, dlat
+
+
+# ------------------------------------------------------------------------------- cells
+
+
+def _cells(world: World) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Cut every lane into convex cells (heading monotone, turning ≤ CELL_TURN, at most
+    CELL_LENGTH long; cuts at vertices, a long straight interval split evenly): ptr (L+1,),
+    s0, s1 [m] and the turn [rad] within each cell."""
+    lane_of, s0, s1, turn = [], [], [], []
+    for i, lane in enumerate(world.lanes.lanes):
+        s, h = lane.s, lane.heading
+        start, lo, hi, sign = 0, h[0], h[0], 0.0
+        for k in range(1, len(s)):
+            dh = h[k] - h[k - 1]
+            sgn = math.copysign(1.0, dh) if abs(dh) > 1e-12 else 0.0
+            nlo, nhi = min(lo, h[k]), max(hi, h[k])
+            bad = nhi - nlo > CELL_TURN or (sgn * sign < 0) or s[k] - s[start] > CELL_LENGTH
+            if bad and k - 1 > start:
+                lane_of.append(i); s0.append(s[start]); s1.append(s[k - 1]); turn.append(hi - lo)
+                start, lo, hi, sign = k - 1, min(h[k - 1], h[k]), max(h[k - 1], h[k]), sgn
+            else:
+                lo, hi, sign = nlo, nhi, sgn or sign
+        lane_of.append(i); s0.append(s[start]); s1.append(s[-1]); turn.append(hi - lo)
+    lane_a, s0a, s1a, ta = np.array(lane_of), np.array(s0), np.array(s1), np.array(turn)
+    parts = np.maximum(1, np.ceil((s1a - s0a) / CELL_LENGTH - 1e-9)).astype(int)
+    rep = np.repeat(np.arange(len(s0a)), parts)
+    k = np.arange(len(rep)) - np.repeat(np.cumsum(parts) - parts, parts)
+    width = (s1a - s0a)[rep] / parts[rep]
+    s0a, s1a = s0a[rep] + k * width, s0a[rep] + (k + 1) * width
+    lane_a, ta = lane_a[rep], ta[rep]
+    ptr = np.searchsorted(lane_a, np.arange(len(world.lanes.lanes) + 1), side="left")
+    return ptr.astype(int), s0a, s1a, ta
+
+
+# ------------------------------------------------------------------------------- lines
+
+
+def _lines(world: World) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    kind = np.concatenate([np.full(len(world.stops.ids), STOP_SIGN), np.full(len(world.lights.ids), LIGHT)])
+    index = np.concatenate([np.arange(len(world.stops.ids)), np.arange(len(world.lights.ids))])
+    lane = np.concatenate([world.stops.lane, world.lights.lane]).astype(int)
+    s = np.concatenate([world.stops.s, world.lights.s]).astype(float)
+    return kind.astype(int), index.astype(int), lane, s
+
+
+def _lane_limits(world: World) -> np.ndarray:
+    """The largest speed limit in force anywhere on each lane [m/s]."""
+    lim, lanes = world.limits, world.lanes
+    out = np.empty(len(lanes.lanes))
+    for i in range(len(lanes.lanes)):
+        lo, hi = lanes.base[i] - 0.5, lanes.base[i] + lanes.length[i]
+        inside = (lim.key >= lo) & (lim.key <= hi)
+        first = lim.at(np.array([i]), np.array([0.0]))[0]
+        out[i] = max([first] + list(lim.value[inside]))
+    return out
+
+
+# ------------------------------------------------------------------------------- trees
+
+
+def _trees(world: World, group: np.ndarray, dlat: np.ndarray, change: bool, limits: np.ndarray,
+           lines: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]) -> LaneTrees:
+    lanes = world.lanes.lanes
+    n = len(lanes)
+    members_of = {g: sorted(np.flatnonzero(group == g).tolist(), key=lambda i: dlat[i]) for g in set(group.tolist())}
+    _, _, line_lane, line_s = lines
+    lines_on = {i: np.flatnonzero(line_lane == i) for i in range(n)}
+    rows: list[tuple] = []  # (ref, natural, offset, parent_rel, leaf, members, depth)
+    ptr = [0]
+    limit, stretch, shrink, extent = np.zeros(n), np.ones(n), np.ones(n), np.full(n, np.inf)
+    for root in range(n):
+        nodes = [(root, root, 0.0, -1, 0)]  # ref, natural, offset, parent, depth
+        k = 0
+        while k < len(nodes):
+            ref, nat, off, _, depth = nodes[k]
+            mem = members_of[group[ref]] if change else [ref]
+            end = off + lanes[ref].length
+            if end < REACH and len(nodes) < MAX_NODES:
+                succ: dict[int, tuple[int, int]] = {}  # child key → (ref, natural)
+                for m in mem:
+                    for q in lanes[m].successors:
+                        key = int(group[q]) if change else int(q)
+                        natural = int(q) if (nat >= 0 and m == nat) else -1
+                        if key not in succ or (natural >= 0 and succ[key][1] < 0):
+                            succ[key] = (int(q), natural)
+                for q, natural in succ.values():
+                    nodes.append((q, natural, end, k, depth + 1))
+            elif any(lanes[m].successors for m in mem):
+                extent[root] = min(extent[root], end)  # cut: beyond here the tree says nothing
+            k += 1
+        for ref, nat, off, parent, depth in nodes:
+            mem = members_of[group[ref]] if change else [ref]
+            leaf = not any(lanes[m].successors for m in mem)
+            rows.append((ref, nat, off, parent, leaf, mem, depth))
+            limit[root] = max(limit[root], max(limits[m] for m in mem))
+            for m in mem:
+                if m != ref:
+                    ratio = np.diff(lanes[ref].s) / np.maximum(np.diff(lanes[m].s), 1e-12)
+                    ok = np.diff(lanes[m].s) > 1e-9
+                    if ok.any():
+                        stretch[root] = max(stretch[root], float(ratio[ok].max()))
+                        shrink[root] = min(shrink[root], float(ratio[ok].min()))
+        ptr.append(len(rows))
+    N = len(rows)
+    M = max(len(r[5]) for r in rows)
+    members = np.full((N, M), -1, dtype=int)
+    dl = np.zeros((N, M))
+    line = np.full((N, M, _MAX_LINES), -1, dtype=int)
+    line_x = np.full((N, M, _MAX_LINES), np.inf)
+    for i, (ref, _, off, _, _, mem, _) in enumerate(rows):
+        for j, m in enumerate(mem):
+            members[i, j] = m
+            dl[i, j] = dlat[m] - dlat[ref]
+            q = lines_on[m][:_MAX_LINES]
+            line[i, j, : len(q)] = q
+            # a member's line at s on the member is at the same vertex fraction on the ref lane
+            line_x[i, j, : len(q)] = off + np.interp(line_s[q], lanes[m].s, lanes[ref].s)
+    col = lambda j, dtype: np.array([r[j] for r in rows], dtype=dtype)  # noqa: E731
+    return LaneTrees(np.asarray(ptr, dtype=int), col(0, int), col(1, int), col(2, float), col(3, int), col(6, int),
+                     col(4, bool), members, dl, line, line_x, limit, stretch, shrink, extent)
+
+
+# ---------------------------------------------------------------------- conflict zones
+
+
+def _behind_route(world: World, route_lanes: frozenset[int]) -> set[int]:
+    """Lanes entered only from the route's lanes (or from lanes entered only so): a lane that
+    branches off the route ahead of the ego. Whoever is on it came along the ego's lane, i.e.
+    from behind the ego."""
+    lanes = world.lanes.lanes
+    preds: dict[int, set[int]] = {i: set() for i in range(len(lanes))}
+    for ln in lanes:
+        for q in ln.successors:
+            preds[q].add(ln.index)
+    inner = set(route_lanes)
+    grew = True
+    while grew:
+        grew = False
+        for i, p in preds.items():
+            if i not in inner and p and p <= inner:
+                inner.add(i)
+                grew = True
+    return inner - set(route_lanes)
+
+
+def _foreign(world: World, route_lanes: frozenset[int], cells: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """Quads covering every lane others may come along near the route — not the route's lanes, not
+    lanes entered only from them (each cell's band, shrunk by :data:`FOREIGN_TOLERANCE`) — and
+    their lane."""
+    ptr, s0, s1, turn = cells
+    lanes = world.lanes
+    lane_of = np.repeat(np.arange(len(lanes.lanes)), np.diff(ptr))
+    own = set(route_lanes) | _behind_route(world, route_lanes)
+    other = ~np.isin(lane_of, list(own))
+    idx = np.flatnonzero(other)
+    if not len(idx):
+        return np.zeros((0, 4, 2)), np.zeros(0, dtype=int)
+    half = lanes.width[lane_of[idx]] / 2 - FOREIGN_TOLERANCE
+    quads, _, centre, _ = band_pieces(lanes, lane_of[idx], s0[idx], s1[idx], -half, half, turn[idx])
+    # near the route: within the route's reach (its points ± a margin)
+    r = world.route
+    near = np.zeros(len(idx), dtype=bool)
+    step = 256
+    pts = r.points[:: max(1, int(5.0 / max(r.spacing, 1e-3)))]
+    for i in range(0, len(pts), step):  # route samples in blocks (precomputation, once per world)
+        d = np.hypot(centre[:, None, 0] - pts[None, i:i + step, 0], centre[:, None, 1] - pts[None, i:i + step, 1])
+        near |= d.min(axis=1) <= CELL_LENGTH + 20.0
+    return quads[near], lane_of[idx][near]
+
+
+def _zones(world: World, foreign: np.ndarray) -> np.ndarray:
+    """Route intervals [s_in, s_out] [m] over which the ego's box centred on the route overlaps a
+    foreign quad."""
+    r = world.route
+    if not len(foreign):
+        return np.zeros((0, 2))
+    s = np.arange(0.0, float(r.s[-1]) + 1e-9, 0.25)
+    pts = r.position(s)
+    psi = r.heading_at(s)
+    from twolevel.models.obb import box_corners
+
+    boxes = box_corners(pts[:, 0], pts[:, 1], psi, world.ego.length, world.ego.width)
+    hit = np.zeros(len(s), dtype=bool)
+    for i in range(0, len(s), 128):
+        b = boxes[i:i + 128]
+        hit[i:i + 128] = overlaps(b[:, None], foreign[None]).any(axis=1)
+    if not hit.any():
+        return np.zeros((0, 2))
+    edges = np.diff(np.concatenate([[0], hit.astype(int), [0]]))
+    start, stop = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
+    lo = s[np.maximum(start - 1, 0)]
+    hi = s[np.minimum(stop + 1, len(s) - 1)]
+    return np.stack([lo, hi], axis=1)
+
+
+def _build(world: World) -> Network:
+    group, dlat = _groups(world)
+    cells = _cells(world)
+    lines = _lines(world)
+    limits = _lane_limits(world)
+    keep = _trees(world, group, dlat, False, limits, lines)
+    change = _trees(world, group, dlat, True, limits, lines)
+    route_lanes = frozenset(int(p[0]) for p in world.route.pieces)
+    foreign, foreign_lane = _foreign(world, route_lanes, cells)
+    zones = _zones(world, foreign)
+    key = world.lanes.base[np.repeat(np.arange(len(cells[0]) - 1), np.diff(cells[0]))] + cells[1]
+    return Network(world, group, dlat, keep, change, *cells, key, *lines, route_lanes, foreign, foreign_lane, zones)

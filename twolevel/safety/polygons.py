@@ -1,0 +1,125 @@
+"""Convex polygons for the safety layer: lane pieces, growing discs, and the separating-axis test.
+
+Everything is vectorised over leading dimensions. A convex polygon is given by its vertices
+(..., V, 2) [m] and the axes (..., A, 2) on which the separating-axis theorem tests it (its edge
+normals; for a swept region, the axes of the boxes it is the hull of). Two convex sets are
+disjoint iff their projections onto some axis are disjoint, and for two convex polygons it
+suffices to test the edge normals of both. Testing the edge normals of a *hull of points* whose
+true edges are unknown (the ego's swept region over an interval) may miss a separating axis, so
+such a test can report an overlap that is not there — never the reverse: the test is sound.
+
+* :func:`band_pieces` — a quad that contains the band of a lane between two arc lengths and two
+  lateral offsets, exactly when the piece is straight and with a proven margin on a bend (see the
+  function);
+* :func:`disc_hull_octagons` — the circumscribed regular-octagon of the convex hull of two discs
+  (a growing disc over a time interval);
+* :func:`intersects` — the separating-axis test; :func:`overlaps` for two sets of rectangles.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from twolevel.world.geometry import LaneSet
+
+__all__ = ["band_pieces", "disc_hull_octagons", "edge_axes", "rect_axes", "intersects", "overlaps",
+           "OCTAGON_NORMALS"]
+
+OCTAGON_NORMALS = np.stack([np.cos(np.arange(8) * np.pi / 4), np.sin(np.arange(8) * np.pi / 4)], axis=1)
+"""The outward normals of the octagons :func:`disc_hull_octagons` builds (8, 2)."""
+
+
+def band_pieces(lanes: LaneSet, lane: np.ndarray, a: np.ndarray, b: np.ndarray, lat_lo: np.ndarray,
+                lat_hi: np.ndarray, turn: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Rectangles containing the points at arc length s ∈ [a, b] [m] and lateral offset
+    λ ∈ [lat_lo, lat_hi] [m] (+ left) of lane ``lane``, where the centre line turns by at most
+    ``turn`` [rad] (< π/2) monotonically over [a, b] (one :mod:`~twolevel.safety.network` cell).
+
+    In the frame of the chord from C(a) to C(b) (length c; u along, v across): a convex arc with
+    its heading within ``turn`` of the chord lies within the triangle of the chord and the end
+    tangents, so |v| ≤ (c/2)·tan(turn/2); its projection on u stays in [0, c]; the normal at
+    every point is within ``turn`` of the chord's normal, so λ·n(s) adds λ·cos φ across (within
+    [min(lo, lo·cos t), max(hi, hi·cos t)]) and at most max(|lo|, |hi|)·sin t along. Exact for a
+    straight piece (turn = 0); beyond the lane's ends the centre line continues straight.
+
+    ``lat_lo``/``lat_hi`` are (N,) or (N, M) (M bands across the same stretch: the frame is
+    computed once). Returns the corners (N[, M], 4, 2) [m] (counter-clockwise from the rear
+    right), the two edge normals (N[, M], 2, 2), the centre (N[, M], 2) [m] and the half
+    diagonal (N[, M]) [m]."""
+    lane = np.asarray(lane, dtype=int)
+    pa, ha = lanes.pose(lane, np.asarray(a, dtype=float))
+    pb, _ = lanes.pose(lane, np.asarray(b, dtype=float))
+    d = pb - pa
+    c = np.hypot(d[:, 0], d[:, 1])
+    fallback = np.stack([np.cos(ha), np.sin(ha)], axis=1)
+    u = np.where((c > 1e-9)[:, None], d / np.maximum(c, 1e-12)[:, None], fallback)
+    v = np.stack([-u[:, 1], u[:, 0]], axis=1)
+    t = np.minimum(np.asarray(turn, dtype=float), 1.5)
+    lo, hi = np.asarray(lat_lo, dtype=float), np.asarray(lat_hi, dtype=float)
+    wide = lo.ndim == 2
+    if wide:  # one frame, M bands
+        c, t, pa, u, v = c[:, None], t[:, None], pa[:, None], u[:, None], v[:, None]
+    dev = 0.5 * c * np.tan(0.5 * t)
+    over = np.maximum(np.abs(lo), np.abs(hi)) * np.sin(t)
+    v_lo = np.minimum(lo, lo * np.cos(t)) - dev
+    v_hi = np.maximum(hi, hi * np.cos(t)) + dev
+    u_lo, u_hi = -over, c + over
+    corners_u = np.stack([u_lo, u_hi, u_hi, u_lo], axis=-1)  # counter-clockwise from rear right
+    corners_v = np.stack([v_lo, v_lo, v_hi, v_hi], axis=-1)
+    quad = pa[..., None, :] + corners_u[..., None] * u[..., None, :] + corners_v[..., None] * v[..., None, :]
+    centre = pa + (0.5 * (u_lo + u_hi))[..., None] * u + (0.5 * (v_lo + v_hi))[..., None] * v
+    axes = np.broadcast_to(np.stack([v, u], axis=-2), quad.shape[:-2] + (2, 2))
+    return quad, axes, centre, 0.5 * np.hypot(u_hi - u_lo, v_hi - v_lo)
+
+
+def disc_hull_octagons(c0: np.ndarray, r0: np.ndarray, c1: np.ndarray, r1: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Octagons (..., 8, 2) [m] circumscribing the convex hull of the discs (c0, r0) and (c1, r1)
+    (centres (..., 2) [m], radii (...) [m]): the half-planes n_k·x ≤ max(n_k·c0 + r0, n_k·c1 + r1)
+    for the eight normals of :data:`OCTAGON_NORMALS` (the support function of the hull in those
+    directions, so every half-plane touches it), vertices where consecutive ones meet. Returns the
+    vertices, a bounding circle's centre (..., 2) and radius (...) [m] (the octagon's vertices
+    are at most r / cos(π/8) from a disc's centre)."""
+    n = OCTAGON_NORMALS
+    h = np.maximum(np.einsum("...j,kj->...k", c0, n) + np.asarray(r0)[..., None],
+                   np.einsum("...j,kj->...k", c1, n) + np.asarray(r1)[..., None])  # (..., 8)
+    h2 = np.roll(h, -1, axis=-1)
+    n2 = np.roll(n, -1, axis=0)
+    det = n[:, 0] * n2[:, 1] - n[:, 1] * n2[:, 0]  # sin(π/4) for every pair
+    x = (h * n2[:, 1] - h2 * n[:, 1]) / det
+    y = (n[:, 0] * h2 - n2[:, 0] * h) / det
+    centre = 0.5 * (c0 + c1)
+    half = 0.5 * np.hypot(c1[..., 0] - c0[..., 0], c1[..., 1] - c0[..., 1])
+    return np.stack([x, y], axis=-1), centre, half + np.maximum(r0, r1) / np.cos(np.pi / 8)
+
+
+def edge_axes(poly: np.ndarray, count: int) -> np.ndarray:
+    """Unit normals (..., count, 2) of the first ``count`` edges of ordered polygons (..., V, 2)
+    (a rectangle needs 2, an octagon with opposite edges parallel 4)."""
+    e = poly[..., 1:count + 1, :] - poly[..., :count, :]
+    norm = np.linalg.norm(e, axis=-1, keepdims=True)
+    e = np.where(norm > 1e-12, e / np.where(norm > 1e-12, norm, 1.0), np.array([1.0, 0.0]))
+    return np.stack([-e[..., 1], e[..., 0]], axis=-1)
+
+
+def rect_axes(rect: np.ndarray) -> np.ndarray:
+    """The two edge normals (..., 2, 2) of rectangles (..., 4, 2)."""
+    return edge_axes(rect, 2)
+
+
+def intersects(pa: np.ndarray, axa: np.ndarray, pb: np.ndarray, axb: np.ndarray) -> np.ndarray:
+    """Whether the convex hulls of the point sets ``pa`` (..., P, 2) and ``pb`` (..., Q, 2) [m]
+    overlap on every axis of ``axa`` (..., A, 2) and ``axb`` (..., B, 2) (broadcast): False proves
+    them disjoint; True is an overlap when the axes include every edge normal of both."""
+    shape = np.broadcast_shapes(axa.shape[:-2], axb.shape[:-2])
+    axes = np.concatenate([np.broadcast_to(axa, shape + axa.shape[-2:]), np.broadcast_to(axb, shape + axb.shape[-2:])],
+                          axis=-2)
+    qa = np.einsum("...kd,...pd->...kp", axes, pa)
+    qb = np.einsum("...kd,...pd->...kp", axes, pb)
+    return np.all((qa.max(-1) >= qb.min(-1)) & (qb.max(-1) >= qa.min(-1)), axis=-1)
+
+
+def overlaps(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Whether rectangles ``a`` (..., 4, 2) and ``b`` (..., 4, 2) [m] overlap (touching counts),
+    broadcast over the leading dimensions."""
+    return intersects(a, rect_axes(a), b, rect_axes(b))

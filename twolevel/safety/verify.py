@@ -1,0 +1,448 @@
+"""Online verification: an intended step is safe if a fail-safe after it avoids every place the
+others may legally be until the ego stands, outside every other lane (Pek, Manzinger, Koschi,
+Althoff, "Using online verification to prevent autonomous vehicles from causing accidents",
+Nature Machine Intelligence 2020).
+
+:func:`verify_step` takes the ego's detailed state and the actuator command [δ, γ] any planner
+intends for the next control step, and:
+
+1. rolls the step out on the detailed model (the plant's equations and parameters);
+2. rolls out fail-safes from the state after it (:mod:`twolevel.safety.failsafe`: braking at
+   RSS's brake_min, firmer, full; clearing a conflict zone first when one is near), gentlest first;
+3. predicts the occupancy of every participant that could come near, per time interval, up to
+   the fail-safe's standstill (:mod:`twolevel.safety.occupancy`);
+4. checks the ego's swept box over every interval — the intended step, then the fail-safe —
+   against the occupancy of that interval (separating axes, :mod:`twolevel.safety.polygons`;
+   a bounding-circle filter first);
+5. requires the standstill to be *invariably safe*: the ego's box at rest overlaps no lane other
+   than its route's (:attr:`~twolevel.safety.network.Network.foreign`), so nobody may legally
+   come where it stands — standing inside a crossing or merging lane is refused, even if nobody
+   is predicted there within the horizon, since someone may be later.
+
+The first fail-safe that passes is kept in the :class:`Verdict` (its commands from the state
+after the step, so the caller can execute it from the next step on when the next plan fails:
+by induction a verified fail-safe is always at hand). A step none of whose fail-safes passes is
+refuted, and the verdict names, for each fail-safe tried, the participant and interval (or the
+lane at standstill) that refuted it.
+
+**What is left to others, by assumption** (each a documented responsibility, not a check):
+
+* **followers**: a participant behind the ego on the ego's lane (along its lane successors) keeps
+  a safe distance (RSS); while the ego's body is within its route lane (± ``lane_tolerance``) its
+  occupancy is not checked. When the ego leaves its lane (the high level may use the adjacent
+  lanes) followers are checked like everyone else;
+* **cut-ins**: a participant changing into the ego's lane leaves the ego RSS's distance; while
+  the ego is within its lane, occupancy a participant reaches only by changing into a lane of the
+  ego's route is not checked. Every fail-safe brakes at least at RSS's brake_min from the next
+  step, so a cut-in that leaves RSS's distance is one the fail-safe stops for;
+* **after standstill** the ego is not checked against anyone: a standing ego outside every other
+  lane is hit only by someone who left its lane, drove backwards or ran into a standing car.
+
+:func:`verify_initial_state` checks the state itself (the fail-safes from it, without a step):
+a scenario that starts unsafe is reported. :func:`time_to_react` is a criticality figure: how
+many steps of an intended plan could still be followed before a fail-safe from there no longer
+verifies.
+
+Units: m, s, m/s, rad; timings in ms.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, fields, replace
+from typing import Callable, Mapping
+
+import numpy as np
+
+from twolevel.models.obb import box_corners
+from twolevel.models.params import VehicleParams
+from twolevel.models.rollout import Backend, rollout
+from twolevel.safety.assumptions import kinds_of
+from twolevel.safety.failsafe import FailSafe, FailSafeSettings, brake_rate, manoeuvres, roll
+from twolevel.safety.network import Network, network_of
+from twolevel.safety.occupancy import Intervals, Occupancy, predict
+from twolevel.safety.polygons import intersects, rect_axes
+from twolevel.world.traffic import TrafficState
+from twolevel.world.world import World
+
+__all__ = ["VerifySettings", "Context", "Refutation", "Verdict", "TimeToReact", "context", "verify_step",
+           "verify_initial_state", "time_to_react", "ego_params"]
+
+
+@dataclass(frozen=True)
+class VerifySettings:
+    """``margin`` [m]: the ego's box grows by it on every side (the sweep between samples, the
+    turning of the box within an interval); ``fine`` [s] of intervals of one control step, then
+    ``coarse`` steps each; ``lane_tolerance`` [m]: how far the ego's body may stick out of its
+    route lane and still count as in it (followers, cut-ins); ``failsafe`` settings; rollout
+    ``backend``."""
+
+    margin: float = 0.1
+    fine: float = 2.0
+    coarse: int = 3
+    lane_tolerance: float = 0.2
+    failsafe: FailSafeSettings = FailSafeSettings()
+    backend: Backend = "auto"
+
+
+@dataclass(frozen=True, eq=False)
+class Context:
+    """What verification needs of a world, built once (:func:`context`): the world, its
+    :class:`~twolevel.safety.network.Network`, the ego's detailed-model parameters, every
+    participant's kind of road user (N,), the settings and the full-braking deceleration
+    ``brake_full`` [m/s²]."""
+
+    world: World
+    network: Network
+    params: VehicleParams
+    kinds: np.ndarray
+    settings: VerifySettings
+    brake_full: float
+
+
+@dataclass(frozen=True)
+class Refutation:
+    """Why one fail-safe failed: ``reason`` is ``collision`` (with ``participant`` over the
+    interval [``t0``, ``t1``] [s] after the verification time; ``step`` when it is the intended
+    step itself, [0, dt]), ``standstill`` (at rest on ``lane``, another lane) or ``no_stop`` (not
+    standing after the settings' max_time)."""
+
+    failsafe: str
+    reason: str
+    participant: str | None = None
+    t0: float = math.nan
+    t1: float = math.nan
+    lane: str | None = None
+
+    def __str__(self) -> str:
+        if self.reason == "collision":
+            return f"{self.failsafe}: may meet '{self.participant}' in [{self.t0:.1f}, {self.t1:.1f}] s"
+        if self.reason == "standstill":
+            return f"{self.failsafe}: stands on lane '{self.lane}'"
+        return f"{self.failsafe}: does not stop"
+
+
+@dataclass(frozen=True, eq=False)
+class Verdict:
+    """The outcome of one verification: ``verified``; the ``failsafe`` that passed (None if none
+    did), from the state after the intended step (or from the state itself for an initial check);
+    ``refutations`` of the fail-safes that failed before it (all of them when none passed);
+    ``horizon`` [s] the occupancy covered; ``participants``: how many were predicted;
+    ``timings_ms``: ``step`` (the intended step's rollout), ``failsafe``, ``prediction``,
+    ``check``, ``total``."""
+
+    verified: bool
+    failsafe: FailSafe | None
+    refutations: tuple[Refutation, ...]
+    horizon: float
+    participants: int
+    timings_ms: Mapping[str, float] = field(default_factory=dict)
+
+    @property
+    def refuted_by(self) -> Refutation | None:
+        """The refutation of the last fail-safe tried, when none passed."""
+        return None if self.verified or not self.refutations else self.refutations[-1]
+
+
+@dataclass(frozen=True)
+class TimeToReact:
+    """How many ``steps`` of an intended plan can be followed with a verified fail-safe after
+    each (−1: not even now; the plan's length H: at least that many, ``at_least``), and the same
+    in ``seconds``."""
+
+    steps: int
+    seconds: float
+    at_least: bool
+
+
+def ego_params(world: World) -> VehicleParams:
+    """The ego's detailed-model parameters: the scenario's overrides and box (as the simulator
+    builds its plant)."""
+    names = {f.name for f in fields(VehicleParams)}
+    p = VehicleParams().with_overrides({k: v for k, v in world.ego.vehicle.items() if k in names})
+    return replace(p, length=world.ego.length, width=world.ego.width)
+
+
+def context(world: World, params: VehicleParams | None = None, settings: VerifySettings | None = None) -> Context:
+    """The verification context of a world (builds its network once)."""
+    p = params or ego_params(world)
+    return Context(world, network_of(world), p, np.asarray(kinds_of(world.parts.ids, world.assumptions), dtype=int),
+                   settings or VerifySettings(), brake_rate(p))
+
+
+# --------------------------------------------------------------------------- the checks
+
+
+@dataclass
+class _Prediction:
+    """The occupancy computed so far in one verification (extended when a longer horizon is
+    needed)."""
+
+    occ: Occupancy | None = None
+    reach: float = 0.0
+    ms: float = 0.0
+
+
+def _route_state(ctx: Context, x: np.ndarray, s_hint: float | None) -> tuple[float, float]:
+    """Route position s [m] and lateral offset e [m] of the ego's centre."""
+    r = ctx.world.route
+    pt = np.asarray(x[:2], dtype=float)[None]
+    if s_hint is None:
+        s, e = r.local_coordinates(pt)
+        return float(s[0]), float(e[0])
+    s, e = r.project_near(pt, np.array([s_hint]), 15.0 + abs(float(x[3])) * 0.5)
+    return float(s[0]), float(e[0])
+
+
+def _excluded(ctx: Context, traffic: TrafficState, s_ego: float, e_ego: float) -> tuple[np.ndarray, frozenset[int]]:
+    """Followers (N,) bool and the protected lanes (cut-ins into them are the cutter's duty), both
+    empty when the ego's body is not within its route lane."""
+    w = ctx.world
+    n = len(traffic.x)
+    width = float(w.route.width_at(np.array([s_ego]))[0])
+    inside = abs(e_ego) + w.ego.width / 2 <= width / 2 + ctx.settings.lane_tolerance
+    if not inside or n == 0:
+        return np.zeros(n, dtype=bool), frozenset()
+    pieces = w.route.pieces
+    j = max(i for i, pc in enumerate(pieces) if pc[3] <= s_ego + 1e-9) if pieces else 0
+    lane_e, a, _, start = pieces[j]
+    s_lane = a + s_ego - start
+    protected = frozenset(int(pc[0]) for pc in pieces[j:])
+    # followers: on a lane whose own lane tree reaches the ego's lane with the ego ahead of them
+    tr = ctx.network.keep
+    lane = traffic.lane.astype(int)
+    on = traffic.active & (lane >= 0)
+    follower = np.zeros(n, dtype=bool)
+    idx = np.flatnonzero(on)
+    if len(idx):
+        start_n, stop_n = tr.ptr[lane[idx]], tr.ptr[lane[idx] + 1]
+        count = stop_n - start_n
+        owner = np.repeat(np.arange(len(idx)), count)
+        node = np.repeat(start_n, count) + np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
+        hit = tr.ref[node] == lane_e
+        x_ego_rear = tr.offset[node] + s_lane - w.ego.length / 2
+        front = traffic.s[idx][owner] + w.parts.length[idx][owner] / 2
+        behind = hit & (front <= x_ego_rear)
+        follower[idx[np.unique(owner[behind])]] = True
+    return follower, protected
+
+
+def _sweeps(states: np.ndarray, iv: Intervals, length: float, width: float, margin: float
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+    """The ego's swept region per interval, as the corners of its boxes at every sample within
+    (J, S·4, 2), the axes of the boxes at both ends (J, 4, 2), a bounding circle (J, 2), (J,), and
+    the number of intervals up to the end of the trajectory ``states`` (T, 12) (one sample per
+    control step, from the verification time)."""
+    T = len(states)
+    J = int(np.searchsorted(iv.k, T - 1, side="left"))  # intervals up to the last sample
+    J = max(1, min(J, iv.count))
+    boxes = box_corners(states[:, 0], states[:, 1], states[:, 2], length + 2 * margin, width + 2 * margin)
+    S = int(np.max(np.diff(iv.k[: J + 1]))) + 1
+    k = iv.k[:J, None] + np.arange(S)[None, :]
+    k = np.minimum(np.minimum(k, iv.k[1:J + 1, None]), T - 1)
+    pts = boxes[k].reshape(J, S * 4, 2)
+    ends = np.concatenate([rect_axes(boxes[np.minimum(iv.k[:J], T - 1)]),
+                           rect_axes(boxes[np.minimum(iv.k[1:J + 1], T - 1)])], axis=1)
+    centre = 0.5 * (pts.max(axis=1) + pts.min(axis=1))
+    radius = np.sqrt(((pts - centre[:, None, :]) ** 2).sum(-1).max(axis=1))
+    return pts, ends, centre, radius, J
+
+
+def _first_collision(occ: Occupancy, checked: np.ndarray, states: np.ndarray, ctx: Context) -> int | None:
+    """Index of the occupancy polygon that refutes the trajectory ``states`` earliest (None: none)."""
+    st = ctx.settings
+    pts, axes, centre, radius, J = _sweeps(states, occ.intervals, ctx.params.length, ctx.params.width, st.margin)
+    sel = np.flatnonzero(checked & (occ.interval < J))
+    if not len(sel):
+        return None
+    j = occ.interval[sel]
+    d = occ.centre[sel] - centre[j]
+    near = d[:, 0] ** 2 + d[:, 1] ** 2 <= (occ.radius[sel] + radius[j]) ** 2
+    cand, j = sel[near], j[near]
+    if not len(cand):
+        return None
+    hit = intersects(pts[j], axes[j], occ.points[cand], occ.axes[cand])
+    if not hit.any():
+        return None
+    order = np.lexsort((cand[hit], j[hit]))
+    return int(cand[hit][order[0]])
+
+
+def _standstill_lane(ctx: Context, state: np.ndarray) -> int | None:
+    """The other lane the ego's box at rest overlaps (None: invariably safe)."""
+    net = ctx.network
+    if not len(net.foreign):
+        return None
+    m = ctx.settings.margin
+    box = box_corners(state[0], state[1], state[2], ctx.params.length + 2 * m, ctx.params.width + 2 * m)
+    centre = net.foreign.mean(axis=1)
+    reach = 0.5 * math.hypot(ctx.params.length, ctx.params.width) + m + CELL_REACH
+    near = np.flatnonzero(np.hypot(centre[:, 0] - state[0], centre[:, 1] - state[1]) <= reach)
+    if not len(near):
+        return None
+    hit = intersects(box[None], rect_axes(box[None]), net.foreign[near], rect_axes(net.foreign[near]))
+    return int(net.foreign_lane[near[np.argmax(hit)]]) if hit.any() else None
+
+
+CELL_REACH = 40.0
+"""Bound on a foreign quad's half diagonal [m] (cells are at most 50 m long; lanes ≤ 10 m wide)."""
+
+
+def _reach(ctx: Context, states: np.ndarray) -> float:
+    """How far the ego's body gets from its first position along ``states`` [m]."""
+    x0 = states[0, :2]
+    return (float(np.max(np.hypot(states[:, 0] - x0[0], states[:, 1] - x0[1])))
+            + 0.5 * math.hypot(ctx.params.length, ctx.params.width) + ctx.settings.margin)
+
+
+def _include(ctx: Context, traffic: TrafficState, x0: np.ndarray, reach: float, horizon: float) -> np.ndarray:
+    """Participants that could come within ``reach`` [m] of ``x0`` within ``horizon`` [s] (N,):
+    their speed bound (or their speed, if faster) × horizon."""
+    w = ctx.world
+    a = w.assumptions
+    limit = float(w.limits.value.max()) if len(w.limits.value) else 0.0
+    cap = np.array([a.bounds(k).speed_cap(limit) for k in range(3)])[ctx.kinds]
+    v_cap = np.maximum(traffic.v, cap)
+    body = 0.5 * np.hypot(w.parts.length, w.parts.width)
+    dist = np.hypot(traffic.x - x0[0], traffic.y - x0[1])
+    return traffic.active & (dist - body <= reach + v_cap * horizon)
+
+
+def _predict(ctx: Context, pred: _Prediction, traffic: TrafficState, t: float, states: np.ndarray, horizon: float
+             ) -> Occupancy:
+    """The occupancy up to ``horizon`` [s] of everyone who could come near ``states`` (computed,
+    or recomputed with some headroom when a longer or farther trajectory needs more)."""
+    have = pred.occ
+    reach = _reach(ctx, states)
+    if have is not None and have.intervals.t[-1] >= horizon - 1e-9 and pred.reach >= reach:
+        return have
+    t0 = time.perf_counter()
+    st = ctx.settings
+    grow = 1.2 if have is not None else 1.0
+    if have is not None:
+        horizon, reach = max(horizon, float(have.intervals.t[-1])) * grow, max(reach, pred.reach) * grow
+    iv = Intervals.make(ctx.world.settings.dt, horizon, st.fine, st.coarse)
+    include = _include(ctx, traffic, states[0, :2], reach, float(iv.t[-1]))
+    pred.occ = predict(ctx.network, traffic, t, iv, ctx.world.assumptions, ctx.kinds, include)
+    pred.reach = reach
+    pred.ms += (time.perf_counter() - t0) * 1e3
+    return pred.occ
+
+
+def _judge(ctx: Context, pred: _Prediction, traffic: TrafficState, t: float, prefix: np.ndarray, fs: FailSafe,
+           checked_of: Callable[[Occupancy], np.ndarray], tm: dict[str, float]) -> Refutation | None:
+    """None if the trajectory ``prefix`` (the intended steps' states, without the fail-safe's
+    start) followed by the fail-safe ``fs`` passes; else why not."""
+    if not fs.stopped:
+        return Refutation(fs.name, "no_stop")
+    states = np.concatenate([prefix, fs.states])
+    dt = ctx.world.settings.dt
+    occ = _predict(ctx, pred, traffic, t, states, (len(states) - 1) * dt)
+    t0 = time.perf_counter()
+    hit = _first_collision(occ, checked_of(occ), states, ctx)
+    lane = None if hit is not None else _standstill_lane(ctx, fs.states[-1])
+    tm["check"] = tm.get("check", 0.0) + (time.perf_counter() - t0) * 1e3
+    if hit is not None:
+        j = int(occ.interval[hit])
+        return Refutation(fs.name, "collision", ctx.world.parts.ids[int(occ.owner[hit])],
+                          float(occ.intervals.t[j]), float(occ.intervals.t[j + 1]))
+    if lane is not None:
+        return Refutation(fs.name, "standstill", lane=ctx.world.lanes.lanes[lane].id)
+    return None
+
+
+def _verify(ctx: Context, x_start: np.ndarray, prefix: np.ndarray, traffic: TrafficState, t: float,
+            s_hint: float | None, tm: dict[str, float], pred: _Prediction) -> tuple[FailSafe | None, list[Refutation]]:
+    """Try the fail-safes from ``x_start`` after the ``prefix`` states; the first that passes."""
+    w, st = ctx.world, ctx.settings
+    s, e = _route_state(ctx, x_start, s_hint)
+    follower, protected = _excluded(ctx, traffic, s, e)
+
+    def checked_of(occ: Occupancy) -> np.ndarray:
+        cut_in = occ.changed & np.isin(occ.lane, list(protected)) if protected else np.zeros(len(occ.lane), bool)
+        return ~follower[occ.owner] & ~cut_in
+
+    plan = manoeuvres(st.failsafe, ctx.network.zones, s, max(float(x_start[3]), 0.0), ctx.brake_full)
+    refuted: list[Refutation] = []
+    batches = [plan[:1], plan[1:]]  # the gentlest alone (usually enough), then the others together
+    for batch in batches:
+        if not batch:
+            continue
+        t0 = time.perf_counter()
+        fss = roll(x_start, batch, w.route, s, w.settings.dt, ctx.params, st.failsafe, st.backend)
+        tm["failsafe"] = tm.get("failsafe", 0.0) + (time.perf_counter() - t0) * 1e3
+        for fs in fss:
+            why = _judge(ctx, pred, traffic, t, prefix, fs, checked_of, tm)
+            if why is None:
+                return fs, refuted
+            refuted.append(why)
+    return None, refuted
+
+
+def _verdict(ctx: Context, fs: FailSafe | None, refuted: list[Refutation], pred: _Prediction, tm: dict[str, float],
+             t_start: float) -> Verdict:
+    tm["prediction"] = pred.ms
+    tm["total"] = (time.perf_counter() - t_start) * 1e3
+    occ = pred.occ
+    horizon = float(occ.intervals.t[-1]) if occ is not None else 0.0
+    return Verdict(fs is not None, fs, tuple(refuted), horizon, len(occ.predicted) if occ is not None else 0, tm)
+
+
+def verify_step(ctx: Context, x0: np.ndarray, control: np.ndarray, traffic: TrafficState, t: float,
+                s_hint: float | None = None) -> Verdict:
+    """Whether the command ``control`` = [δ rad, γ] for the next step from the ego's detailed state
+    ``x0`` (12,) at time ``t`` [s], with the others as ``traffic`` shows them now, keeps a fail-safe
+    (see the module docstring). ``s_hint`` [m]: the ego's route position, if known (speeds up the
+    projection)."""
+    t_start = time.perf_counter()
+    tm: dict[str, float] = {}
+    x0 = np.asarray(x0, dtype=float)
+    x1 = rollout(x0, np.asarray(control, dtype=float).reshape(1, 1, 2), ctx.world.settings.dt, ctx.params,
+                 ctx.settings.backend).states[0, 1]
+    tm["step"] = (time.perf_counter() - t_start) * 1e3
+    pred = _Prediction()
+    fs, refuted = _verify(ctx, x1, x0[None], traffic, t, s_hint, tm, pred)
+    return _verdict(ctx, fs, refuted, pred, tm, t_start)
+
+
+def verify_initial_state(ctx: Context, x0: np.ndarray, traffic: TrafficState, t: float = 0.0,
+                         s_hint: float | None = None) -> Verdict:
+    """Whether the state ``x0`` itself has a fail-safe (at the start of a run: a scenario that
+    starts unsafe is reported by a refuted verdict)."""
+    t_start = time.perf_counter()
+    tm: dict[str, float] = {}
+    pred = _Prediction()
+    fs, refuted = _verify(ctx, np.asarray(x0, dtype=float), np.zeros((0, 12)), traffic, t, s_hint, tm, pred)
+    return _verdict(ctx, fs, refuted, pred, tm, t_start)
+
+
+def time_to_react(ctx: Context, x0: np.ndarray, plan: np.ndarray, traffic: TrafficState, t: float,
+                  s_hint: float | None = None) -> TimeToReact:
+    """How many steps of the intended ``plan`` (H, 2) [δ rad, γ] from ``x0`` could be followed with
+    a verified fail-safe after each: the largest k such that the fail-safe after k steps verifies,
+    found by bisection from k = H down (assuming that once no fail-safe verifies after k steps,
+    none does after more: the others' sets only grow)."""
+    dt = ctx.world.settings.dt
+    plan = np.asarray(plan, dtype=float).reshape(-1, 2)
+    H = len(plan)
+    xs = rollout(np.asarray(x0, dtype=float), plan[None], dt, ctx.params, ctx.settings.backend).states[0]  # (H+1, 12)
+    pred = _Prediction()
+    tm: dict[str, float] = {}
+
+    def ok(k: int) -> bool:
+        fs, _ = _verify(ctx, xs[k], xs[:k], traffic, t, s_hint, tm, pred)
+        return fs is not None
+
+    if ok(H):
+        return TimeToReact(H, H * dt, True)
+    if not ok(0):
+        return TimeToReact(-1, -dt, False)
+    lo, hi = 0, H  # ok(lo), not ok(hi)
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if ok(mid):
+            lo = mid
+        else:
+            hi = mid
+    return TimeToReact(lo, lo * dt, False)
