@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from twolevel.safety.polygons import band_pieces, overlaps
+from twolevel.safety.polygons import band_pieces, overlaps, rect_axes
 from twolevel.world.world import World
 
 __all__ = ["Network", "LaneTrees", "network_of", "REACH", "CELL_TURN", "CELL_LENGTH", "STOP_SIGN", "LIGHT"]
@@ -47,6 +47,8 @@ CELL_TURN = 0.08
 """Largest heading change within a cell [rad]."""
 CELL_LENGTH = 50.0
 """Longest cell [m]."""
+BODY_REACH = 10.0
+"""Half a long vehicle [m]: a body on a cell may reach this far into the neighbouring ones."""
 STOP_SIGN, LIGHT = 0, 1
 _MAX_LINES = 4  # lines per lane kept on a tree node
 
@@ -89,11 +91,15 @@ class Network:
     ``group`` (L,) group id of each lane, ``dlat`` (L,) [m] offset in its group; ``keep`` and
     ``change``: the lane trees without and with lane changes; cells ``cell_ptr`` (L+1,),
     ``cell_s0``/``cell_s1`` (C,) [m], ``cell_turn`` (C,) [rad], ``cell_key`` (C,) the start's
-    global key (the lane set's ``base`` + s0, sorted); lines ``line_kind`` (Q,)
+    global key (the lane set's ``base`` + s0, sorted), ``cell_kappa`` (C,) [1/m] the largest
+    turning per metre within :data:`BODY_REACH` of the cell (corners, and joints with a jump of
+    heading, counted as turning over a metre); ``lane_kappa`` (L,) [1/m]: the largest over each
+    lane's cells; lines ``line_kind`` (Q,)
     (:data:`STOP_SIGN` or :data:`LIGHT`), ``line_index`` (Q,) into the world's stops or lights,
     ``line_lane`` (Q,), ``line_s`` (Q,) [m]; ``route_lanes``: lane indices the route runs along;
     ``foreign`` (F, 4, 2) [m]: quads covering every other lane near the route (shrunk by
-    ``FOREIGN_TOLERANCE``), ``foreign_lane`` (F,); ``zones`` (Z, 2) [m]: route intervals where
+    ``FOREIGN_TOLERANCE``), their edge normals ``foreign_axes`` (F, 2, 2), centres
+    ``foreign_centre`` (F, 2) [m] and lanes ``foreign_lane`` (F,); ``zones`` (Z, 2) [m]: route intervals where
     the ego centred on the route overlaps one of them."""
 
     world: World
@@ -106,12 +112,16 @@ class Network:
     cell_s1: np.ndarray
     cell_turn: np.ndarray
     cell_key: np.ndarray
+    cell_kappa: np.ndarray
+    lane_kappa: np.ndarray
     line_kind: np.ndarray
     line_index: np.ndarray
     line_lane: np.ndarray
     line_s: np.ndarray
     route_lanes: frozenset[int]
     foreign: np.ndarray
+    foreign_axes: np.ndarray
+    foreign_centre: np.ndarray
     foreign_lane: np.ndarray
     zones: np.ndarray
 
@@ -168,23 +178,35 @@ def _groups(world: World) -> tuple[np.ndarray, np.ndarray]:
 
 def _cells(world: World) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Cut every lane into convex cells (heading monotone, turning ≤ CELL_TURN, at most
-    CELL_LENGTH long; cuts at vertices, a long straight interval split evenly): ptr (L+1,),
-    s0, s1 [m] and the turn [rad] within each cell."""
+    CELL_LENGTH long; cuts at vertices, a long straight interval split evenly; a polyline's
+    corner — the heading jumping at one point — is a cell of its own, of zero length, turning by
+    the jump): ptr (L+1,), s0, s1 [m] and the turn [rad] within each cell."""
     lane_of, s0, s1, turn = [], [], [], []
+
+    def close(i: int, a: float, b: float, t: float) -> None:
+        lane_of.append(i); s0.append(a); s1.append(b); turn.append(t)
+
     for i, lane in enumerate(world.lanes.lanes):
         s, h = lane.s, lane.heading
         start, lo, hi, sign = 0, h[0], h[0], 0.0
         for k in range(1, len(s)):
             dh = h[k] - h[k - 1]
+            if s[k] - s[k - 1] <= 1e-9 and abs(dh) > 1e-12:  # a corner
+                if k - 1 > start:
+                    close(i, s[start], s[k - 1], hi - lo)
+                close(i, s[k], s[k], abs(dh))
+                start, lo, hi, sign = k, h[k], h[k], 0.0
+                continue
             sgn = math.copysign(1.0, dh) if abs(dh) > 1e-12 else 0.0
             nlo, nhi = min(lo, h[k]), max(hi, h[k])
             bad = nhi - nlo > CELL_TURN or (sgn * sign < 0) or s[k] - s[start] > CELL_LENGTH
             if bad and k - 1 > start:
-                lane_of.append(i); s0.append(s[start]); s1.append(s[k - 1]); turn.append(hi - lo)
+                close(i, s[start], s[k - 1], hi - lo)
                 start, lo, hi, sign = k - 1, min(h[k - 1], h[k]), max(h[k - 1], h[k]), sgn
             else:
                 lo, hi, sign = nlo, nhi, sgn or sign
-        lane_of.append(i); s0.append(s[start]); s1.append(s[-1]); turn.append(hi - lo)
+        if start < len(s) - 1 or not lane_of or lane_of[-1] != i:
+            close(i, s[start], s[-1], hi - lo)
     lane_a, s0a, s1a, ta = np.array(lane_of), np.array(s0), np.array(s1), np.array(turn)
     parts = np.maximum(1, np.ceil((s1a - s0a) / CELL_LENGTH - 1e-9)).astype(int)
     rep = np.repeat(np.arange(len(s0a)), parts)
@@ -321,7 +343,7 @@ def _foreign(world: World, route_lanes: frozenset[int], cells: tuple[np.ndarray,
     if not len(idx):
         return np.zeros((0, 4, 2)), np.zeros(0, dtype=int)
     half = lanes.width[lane_of[idx]] / 2 - FOREIGN_TOLERANCE
-    quads, _, centre, _ = band_pieces(lanes, lane_of[idx], s0[idx], s1[idx], -half, half, turn[idx])
+    quads, _, centre, _, _ = band_pieces(lanes, lane_of[idx], s0[idx], s1[idx], -half, half, turn[idx])
     # near the route: within the route's reach (its points ± a margin)
     r = world.route
     near = np.zeros(len(idx), dtype=bool)
@@ -369,4 +391,35 @@ def _build(world: World) -> Network:
     foreign, foreign_lane = _foreign(world, route_lanes, cells)
     zones = _zones(world, foreign)
     key = world.lanes.base[np.repeat(np.arange(len(cells[0]) - 1), np.diff(cells[0]))] + cells[1]
-    return Network(world, group, dlat, keep, change, *cells, key, *lines, route_lanes, foreign, foreign_lane, zones)
+    near = _bends_near(world, cells)
+    kappa = np.array([near[cells[0][i]:cells[0][i + 1]].max(initial=0.0) for i in range(len(world.lanes.lanes))])
+    return Network(world, group, dlat, keep, change, *cells, key, near, kappa, *lines, route_lanes, foreign,
+                   rect_axes(foreign), foreign.mean(axis=1), foreign_lane, zones)
+
+
+def _bends_near(world: World, cells: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
+    """The largest turning per metre [1/m] within :data:`BODY_REACH` of each cell: of the cells
+    of its lane, and near the lane's ends of the lanes before and after it (with the jump of
+    heading where they join, if any)."""
+    ptr, s0, s1, turn = cells
+    lanes = world.lanes.lanes
+    rate = turn / np.maximum(s1 - s0, 1.0)
+    near = np.zeros(len(s0))
+    head, tail = np.zeros(len(lanes)), np.zeros(len(lanes))  # rates near each lane's start / end
+    for i in range(len(lanes)):  # per lane: cells within a body's reach of each other
+        a, b = ptr[i], ptr[i + 1]
+        meet = (s0[None, a:b] <= s1[a:b, None] + BODY_REACH) & (s1[None, a:b] >= s0[a:b, None] - BODY_REACH)
+        near[a:b] = np.where(meet, rate[None, a:b], 0.0).max(axis=1)
+        head[i] = rate[a:b][s0[a:b] <= BODY_REACH].max(initial=0.0)
+        tail[i] = rate[a:b][s1[a:b] >= lanes[i].length - BODY_REACH].max(initial=0.0)
+    for ln in lanes:
+        i = ln.index
+        a, b = ptr[i], ptr[i + 1]
+        for q in ln.successors:  # across the joint, both ways
+            jump = abs((lanes[q].heading[0] - ln.heading[-1] + math.pi) % (2 * math.pi) - math.pi)
+            end = s1[a:b] >= ln.length - BODY_REACH
+            near[a:b] = np.where(end, np.maximum(near[a:b], max(head[q], jump)), near[a:b])
+            qa, qb = ptr[q], ptr[q + 1]
+            start = s0[qa:qb] <= BODY_REACH
+            near[qa:qb] = np.where(start, np.maximum(near[qa:qb], max(tail[i], jump)), near[qa:qb])
+    return near

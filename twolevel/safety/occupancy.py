@@ -22,7 +22,9 @@ parallel lanes of the same direction too). Along the path:
   changes, a line caps a lane group only where every member lane's line does (it may go round).
   Branches behind a capped line are unreachable while it holds;
 * laterally: the lane's width (or, with lane changes, every member lane's), widened so that the
-  body as observed now fits (a user straddling a marking stays predicted as wide as it is).
+  body as observed now fits (a user straddling a marking stays predicted as wide as it is) and by
+  what a rigid body sticks out of its lane on a bend (L²·κ/8 across, W·L·κ/4 along, with κ the
+  sharpest turning within a body's reach, corners and joints between lanes included).
 
 Each (participant, tree node, member lane, interval) interval of arc length is cut at the lane's
 cells and each cut turned into a quad (:func:`~twolevel.safety.polygons.band_pieces`: exact on
@@ -42,14 +44,15 @@ Units: m, s, m/s, m/s².
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from twolevel.safety.assumptions import PEDESTRIAN, Assumptions
-from twolevel.safety.network import LIGHT, STOP_SIGN, Network
-from twolevel.safety.polygons import OCTAGON_NORMALS, band_pieces, disc_hull_octagons
+from twolevel.safety.network import CELL_LENGTH, CELL_TURN, LIGHT, STOP_SIGN, Network
+from twolevel.safety.polygons import OCTAGON_NORMALS, band_pieces, disc_hull_octagons, lane_point
 from twolevel.world.traffic import RED, TrafficState
 
 __all__ = ["Intervals", "Occupancy", "predict", "travel_max", "travel_min", "time_to_travel", "STOP_ZONE",
@@ -94,7 +97,8 @@ class Occupancy:
     """Predicted occupancy: M convex polygons, each for one participant over one interval.
 
     ``points`` (M, 8, 2) [m] vertices (quads repeat theirs), ``axes`` (M, 4, 2) their edge normals
-    (repeated for quads), bounding circles ``centre`` (M, 2) / ``radius`` (M,) [m], ``interval``
+    (repeated for quads), bounding circles ``centre`` (M, 2) / ``radius`` (M,) [m] and the half
+    sizes ``extent`` (M, 2) [m] of axis-aligned bounding boxes about the same centre, ``interval``
     (M,) index j, ``owner`` (M,) participant index in the traffic arrays, ``lane`` (M,) the lane the
     piece lies on (−1 for free users), ``changed`` (M,) whether it is reached only by changing
     into that lane. ``predicted`` (P,): the participants predicted, ``free`` (P,) which of them
@@ -106,6 +110,7 @@ class Occupancy:
     axes: np.ndarray
     centre: np.ndarray
     radius: np.ndarray
+    extent: np.ndarray
     interval: np.ndarray
     owner: np.ndarray
     lane: np.ndarray
@@ -209,7 +214,7 @@ def _body_on_lane(net: Network, lane: np.ndarray, s: np.ndarray, traffic: Traffi
     from twolevel.models.obb import box_corners
 
     world = net.world
-    p, h = world.lanes.pose(lane, s)
+    p, h = lane_point(world.lanes, lane, s)
     corners = box_corners(traffic.x[idx], traffic.y[idx], traffic.psi[idx], world.parts.length[idx],
                           world.parts.width[idx])  # (P, 4, 2)
     rel = corners - p[:, None, :]
@@ -220,11 +225,56 @@ def _body_on_lane(net: Network, lane: np.ndarray, s: np.ndarray, traffic: Traffi
     return along.max(axis=1), -along.min(axis=1), extra
 
 
+@dataclass(frozen=True, eq=False)
+class _Users:
+    """The participants being predicted (P of them) and what the prediction needs of each:
+    ``idx`` (P,) into the traffic arrays, ``kind``, the speed ``v0`` [m/s] and its bound ``v_cap``,
+    ``a_max`` [m/s²], ``v_sw`` [m/s], ``changes`` (may change lanes), ``lane`` (−1: none) and the
+    lane-bound users' path bounds: ``front0``/``rear0`` [m] now, ``front_hi``/``rear_lo`` (P, J)
+    [m], the body's ``length`` along its lane, ``width`` and ``extra`` width beyond the lane [m],
+    and the tree's
+    ``stretch`` [-]."""
+
+    idx: np.ndarray
+    kind: np.ndarray
+    v0: np.ndarray
+    v_cap: np.ndarray
+    a_max: np.ndarray
+    v_sw: np.ndarray
+    changes: np.ndarray
+    lane: np.ndarray
+    front0: np.ndarray
+    front_hi: np.ndarray
+    rear_lo: np.ndarray
+    length: np.ndarray
+    width: np.ndarray
+    extra: np.ndarray
+    stretch: np.ndarray
+    table: tuple
+    bounds: np.ndarray
+
+    def flag(self, name: str) -> np.ndarray:
+        """A boolean bound of each user's kind (``stop_lines`` or ``red_lights``)."""
+        return self.bounds[:, _COLUMNS.index(name)] > 0
+
+
+_COLUMNS = ("v_max", "speed_factor", "a_max", "v_switch", "lane_bound", "lane_changes", "stop_lines", "red_lights")
+
+
+@functools.lru_cache(maxsize=8)
+def _bounds_table(a: Assumptions) -> np.ndarray:
+    """The bounds of each kind of road user as a table (3, 8), columns :data:`_COLUMNS`."""
+    return np.array([[float(getattr(a.bounds(k), c)) for c in _COLUMNS] for k in range(3)])
+
+
 def predict(net: Network, traffic: TrafficState, t: float, intervals: Intervals, assumptions: Assumptions,
-            kinds: np.ndarray, include: np.ndarray | None = None) -> Occupancy:
+            kinds: np.ndarray, include: np.ndarray | None = None,
+            roi: tuple[np.ndarray, np.ndarray] | None = None) -> Occupancy:
     """The occupancy of the participants (active, and ``include`` (N,) if given) over
     ``intervals`` from the traffic at absolute time ``t`` [s]; ``kinds`` (N,) their kinds of road
-    user (:func:`~twolevel.safety.assumptions.kinds_of`)."""
+    user (:func:`~twolevel.safety.assumptions.kinds_of`). With ``roi`` = (centres (J, 2) [m],
+    radii (J,) [m]) only the pieces that may reach the circle of their interval are kept (bounding
+    circles of whole stretches are tested before the stretches are cut into pieces)."""
     mask = traffic.active.copy()
     if include is not None:
         mask &= include
@@ -233,14 +283,14 @@ def predict(net: Network, traffic: TrafficState, t: float, intervals: Intervals,
     if P == 0 or J == 0:
         return _empty(intervals, idx, P, J)
     kind = np.asarray(kinds)[idx]
-    table = [assumptions.bounds(k) for k in range(3)]
-    pick = lambda name: np.array([getattr(table[k], name) for k in kind], dtype=float)  # noqa: E731
-    a_max, v_sw, v_max, factor = pick("a_max"), pick("v_switch"), pick("v_max"), pick("speed_factor")
-    changes = pick("lane_changes").astype(bool)
+    table = tuple(assumptions.bounds(k) for k in range(3))
+    col = _bounds_table(assumptions)[kind]  # (P, 8)
+    v_max, factor, a_max, v_sw = col[:, 0], col[:, 1], col[:, 2], col[:, 3]
+    changes = col[:, 5] > 0
     v0 = np.maximum(traffic.v[idx].astype(float), 0.0)
 
     lane, s0 = _lane_of(net, traffic, idx)
-    on_lane = pick("lane_bound").astype(bool) & (lane >= 0)
+    on_lane = (col[:, 4] > 0) & (lane >= 0)
     li = np.maximum(lane, 0)
     per_tree = lambda name: np.where(changes, getattr(net.change, name)[li], getattr(net.keep, name)[li])  # noqa: E731
     v_cap = np.maximum(v0, np.minimum(v_max, factor * per_tree("limit")))
@@ -252,85 +302,113 @@ def predict(net: Network, traffic: TrafficState, t: float, intervals: Intervals,
     front_hi = front0[:, None] + d_hi * stretch[:, None]
     rear_lo = rear0[:, None] + d_lo * shrink[:, None]
     on_lane &= front_hi[:, -1] <= per_tree("extent")  # reach beyond its lane tree: predicted freely
-    free = ~on_lane
-
-    quads = _lane_pieces(net, traffic, t, intervals, idx, np.flatnonzero(on_lane), li, changes, kind, table,
-                         front0, front_hi, rear_lo, v0, v_cap, a_max, v_sw, stretch, ahead + behind, extra)
-    octas = _free_pieces(net, traffic, intervals, idx, np.flatnonzero(free), v0, a_max, kind, table)
-    parts = [p for p in (quads, octas) if p is not None]
+    near = np.ones(P, dtype=bool)
+    if roi is not None:  # who can get within the region at all (speed bound × time, any direction)
+        limit = float(net.world.limits.value.max()) if len(net.world.limits.value) else 0.0
+        v_any = np.where(on_lane, v_cap, np.maximum(v0, np.where(kind == PEDESTRIAN, v_max,
+                                                                 np.minimum(v_max, factor * limit))))
+        body = 0.5 * np.hypot(net.world.parts.length[idx], net.world.parts.width[idx])
+        d = np.hypot(traffic.x[idx][:, None] - roi[0][None, :, 0], traffic.y[idx][:, None] - roi[0][None, :, 1])
+        near = np.any(d <= roi[1][None, :] + body[:, None] + v_any[:, None] * intervals.t[None, 1:], axis=1)
+    users = _Users(idx, kind, v0, v_cap, a_max, v_sw, changes, li, front0, front_hi, rear_lo, ahead + behind,
+                   net.world.parts.width[idx], extra, stretch, table, col)
+    parts = [_tree_pieces(net, net.trees(mode), t, intervals, users, np.flatnonzero(near & on_lane & (changes == mode)),
+                          roi) for mode in (False, True)]
+    parts.append(_free_pieces(net, traffic, intervals, users, np.flatnonzero(near & ~on_lane), roi))
+    parts = [p for p in parts if p is not None]
     if not parts:
         return _empty(intervals, idx, P, J)
-    points, axes, centre, radius, interval, owner, lane_of, changed = (np.concatenate([p[i] for p in parts])
-                                                                        for i in range(8))
+    points, axes, centre, radius, extent, interval, owner, lane_of, changed = (
+        np.concatenate([p[i] for p in parts]) for i in range(9))
     fh = np.where(on_lane[:, None], front_hi, np.nan)
     rl = np.where(on_lane[:, None], rear_lo, np.nan)
-    return Occupancy(intervals, points, axes, centre, radius, interval, owner, lane_of, changed, idx, free, fh, rl)
+    return Occupancy(intervals, points, axes, centre, radius, extent, interval, owner, lane_of, changed, idx, ~on_lane,
+                     fh, rl)
 
 
 def _empty(iv: Intervals, idx: np.ndarray, P: int, J: int) -> Occupancy:
     z = np.zeros(0, dtype=int)
-    return Occupancy(iv, np.zeros((0, 8, 2)), np.zeros((0, 4, 2)), np.zeros((0, 2)), np.zeros(0), z, z, z,
+    return Occupancy(iv, np.zeros((0, 8, 2)), np.zeros((0, 4, 2)), np.zeros((0, 2)), np.zeros(0), np.zeros((0, 2)), z, z, z,
                      np.zeros(0, dtype=bool), idx, np.zeros(P, dtype=bool), np.full((P, J), np.nan), np.full((P, J), np.nan))
 
 
-def _lane_pieces(net: Network, traffic: TrafficState, t: float, iv: Intervals, idx: np.ndarray, sel: np.ndarray,
-                 lane: np.ndarray, changes: np.ndarray, kind: np.ndarray, table: list, front0: np.ndarray,
-                 front_hi: np.ndarray, rear_lo: np.ndarray, v0: np.ndarray, v_cap: np.ndarray, a_max: np.ndarray,
-                 v_sw: np.ndarray, stretch: np.ndarray, length: np.ndarray, extra: np.ndarray) -> tuple | None:
-    """Quads of the lane-bound participants ``sel`` (indices into ``idx``)."""
-    if not len(sel) or iv.count == 0:
+def _near(centre: np.ndarray, radius: np.ndarray, j: np.ndarray, roi: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray:
+    """Which circles (centre (n, 2), radius (n,)) of intervals ``j`` (n,) meet their interval's
+    region of interest (all, without one)."""
+    if roi is None:
+        return np.ones(len(j), dtype=bool)
+    c, r = roi
+    d = centre - c[j]
+    return d[:, 0] ** 2 + d[:, 1] ** 2 <= (radius + r[j]) ** 2
+
+
+def _tree_pieces(net: Network, tr, t: float, iv: Intervals, u: _Users, who: np.ndarray,
+                 roi: tuple[np.ndarray, np.ndarray] | None) -> tuple | None:
+    """Quads of the lane-bound users ``who`` (indices into the users) along trees ``tr``."""
+    if not len(who):
         return None
+    lanes = net.world.lanes
     J = iv.count
-    out = []
-    for mode in (False, True):  # participants keeping their lane, then those who may change
-        who = sel[changes[sel] == mode]
-        if len(who):
-            out.append(_tree_pieces(net, net.trees(mode), t, iv, idx, who, lane, kind, table, front0, front_hi,
-                                    rear_lo, v0, v_cap, a_max, v_sw, stretch, length, extra, J))
-    out = [o for o in out if o is not None]
-    if not out:
-        return None
-    return tuple(np.concatenate([o[i] for o in out]) for i in range(8))
-
-
-def _tree_pieces(net: Network, tr, t: float, iv: Intervals, idx: np.ndarray, who: np.ndarray, lane: np.ndarray,
-                 kind: np.ndarray, table: list, front0: np.ndarray, front_hi: np.ndarray, rear_lo: np.ndarray,
-                 v0: np.ndarray, v_cap: np.ndarray, a_max: np.ndarray, v_sw: np.ndarray, stretch: np.ndarray,
-                 length: np.ndarray, extra: np.ndarray, J: int) -> tuple | None:
-    world = net.world
-    lanes = world.lanes
-    # --- every participant's tree nodes, flattened ---------------------------------------
-    start, stop = tr.ptr[lane[who]], tr.ptr[lane[who] + 1]
+    # --- every user's tree nodes, flattened ---------------------------------------------
+    start, stop = tr.ptr[u.lane[who]], tr.ptr[u.lane[who] + 1]
     count = stop - start
-    p_of = np.repeat(who, count)  # participant (index into idx) of each node
+    p_of = np.repeat(who, count)  # user of each node
     first = np.repeat(np.cumsum(count) - count, count)
     node = np.repeat(start, count) + np.arange(count.sum()) - first
     parent = np.where(tr.parent[node] >= 0, first + tr.parent[node], -1)  # index into these nodes
-    # --- line caps (nodes, members, lines, intervals) ------------------------------------
     members = tr.members[node]  # (N, M)
+    # --- line caps, then each node's stretch of its ref lane per interval ----------------
     cap = np.full((len(node), J), np.inf)
-    line = tr.line[node]  # (N, M, K)
-    if (line >= 0).any():
-        cap = _line_caps(net, tr, t, iv, node, p_of, members, kind, table, front0, v0, v_cap, a_max, v_sw, stretch)
+    if (tr.line[node] >= 0).any():
+        cap = _line_caps(net, tr, t, iv, node, p_of, members, u)
         for d in range(1, int(tr.depth[node].max(initial=0)) + 1):  # branches behind a capped line
             at = np.flatnonzero(tr.depth[node] == d)
             cap[at] = np.minimum(cap[at], cap[parent[at]])
-    # --- each node's interval of its ref lane, per interval ----------------------------
     off = tr.offset[node][:, None]
     ref = tr.ref[node]
-    hi = np.minimum(front_hi[p_of], cap)
-    lo = np.minimum(rear_lo[p_of], hi - length[p_of][:, None])
-    a = lo - off
-    b = hi - off
-    a = np.where((tr.parent[node] >= 0)[:, None], np.maximum(a, 0.0), a)
-    b = np.where(tr.leaf[node][:, None], b, np.minimum(b, lanes.length[ref][:, None]))
-    ok = b > a  # (N, J)
-    # --- expand over cells, then members (one chord frame per cell, M bands across) -----
-    n_i, j_i = np.nonzero(ok)
+    hi = np.minimum(u.front_hi[p_of], cap)
+    lo = np.minimum(u.rear_lo[p_of], hi - u.length[p_of][:, None])
+    # on a bend a rigid box's corners reach beyond its ends' path positions by about W·L·κ/4
+    reach = (u.width[p_of] * u.length[p_of] * net.lane_kappa[ref] / 4.0)[:, None]
+    lo, hi = lo - reach, hi + reach
+    a = np.where((tr.parent[node] >= 0)[:, None], np.maximum(lo - off, 0.0), lo - off)
+    b = np.where(tr.leaf[node][:, None], hi - off, np.minimum(hi - off, lanes.length[ref][:, None]))
+    n_i, j_i = np.nonzero(b > a)
     if not len(n_i):
         return None
+    dl = tr.dlat[node[n_i]]  # (n, M) members' offsets from the ref lane
+    # half widths: the lane's and what the body sticks out now; on a bend a rigid box also sticks
+    # out of the band its centre keeps to, by L²·κ/8 at curvature κ (per cell, below)
+    bend_out = u.length[p_of[n_i]] ** 2 * net.lane_kappa[ref[n_i]] / 8.0
+    half = lanes.width[np.maximum(members[n_i], 0)] / 2 + u.extra[p_of[n_i]][:, None]
+    valid = members[n_i] >= 0
+    if roi is not None:  # a bounding circle of each stretch (all members), tested against the region
+        lat_lo = np.where(valid, dl - half, np.inf).min(axis=1)
+        lat_hi = np.where(valid, dl + half, -np.inf).max(axis=1)
+        r, pa, pb = ref[n_i], a[n_i, j_i], b[n_i, j_i]
+        mid, h = lane_point(lanes, r, 0.5 * (pa + pb))
+        lat = 0.5 * (lat_lo + lat_hi)
+        centre = mid + lat[:, None] * np.stack([-np.sin(h), np.cos(h)], axis=1)
+        length = pb - pa
+        bend = np.minimum(2.0, np.maximum(length, 1.0) * net.lane_kappa[r])  # how far the normal turns along it
+        wide = np.maximum(np.abs(lat_lo), np.abs(lat_hi))
+        slack = np.where(net.lane_kappa[r] > 0, 0.5 * np.minimum(length, CELL_LENGTH) * np.tan(CELL_TURN / 2)
+                         + wide * np.sin(CELL_TURN), 0.0)  # what the quads add on bends
+        radius = 0.5 * length + 0.5 * (lat_hi - lat_lo) + np.abs(lat) * bend + slack + bend_out
+        keep = _near(centre, radius, j_i, roi)
+        n_i, j_i, dl, half, valid = n_i[keep], j_i[keep], dl[keep], half[keep], valid[keep]
+    # --- per member lane ---------------------------------------------------------------------
+    M = members.shape[1]
+    flat = valid.ravel()
+    m_i = np.tile(np.arange(M), len(n_i))[flat]
+    dl, half = dl.ravel()[flat], half.ravel()[flat]
+    n_i, j_i = np.repeat(n_i, M)[flat], np.repeat(j_i, M)[flat]
+    if not len(n_i):
+        return None
+    member = members[n_i, m_i]
     r = ref[n_i]
     pa, pb = a[n_i, j_i], b[n_i, j_i]
+    # --- cut at the cells into quads -------------------------------------------------------
     c_lo = np.clip(np.searchsorted(net.cell_key, lanes.base[r] + pa, side="right") - 1, net.cell_ptr[r],
                    net.cell_ptr[r + 1] - 1)
     c_hi = np.clip(np.searchsorted(net.cell_key, lanes.base[r] + pb, side="right") - 1, net.cell_ptr[r],
@@ -341,23 +419,20 @@ def _tree_pieces(net: Network, tr, t: float, iv: Intervals, idx: np.ndarray, who
     cell = np.repeat(c_lo, n_c) + np.arange(n_c.sum()) - np.repeat(np.cumsum(n_c) - n_c, n_c)
     sa = np.where(cell == c_lo[rep], pa[rep], net.cell_s0[cell])
     sb = np.where(cell == c_hi[rep], pb[rep], net.cell_s1[cell])
-    n_r, p_r = n_i[rep], p_of[n_i[rep]]
-    member = members[n_r]  # (R, M)
-    dl = tr.dlat[node[n_r]]
-    half = lanes.width[np.maximum(member, 0)] / 2 + extra[p_r][:, None]
-    quad, axes, centre, radius = band_pieces(lanes, r[rep], sa, sb, dl - half, dl + half, net.cell_turn[cell])
-    valid = member >= 0
-    natural = tr.natural[node[n_r]][:, None]
-    changed = (natural >= 0) & (member != natural)
-    quad, axes = quad[valid], axes[valid]
-    pick = lambda arr: np.broadcast_to(arr[:, None], member.shape)[valid]  # noqa: E731
-    return (np.concatenate([quad, quad], axis=1), np.concatenate([axes, axes], axis=1), centre[valid], radius[valid],
-            pick(j_i[rep]), pick(idx[p_r]), member[valid], changed[valid])
+    half = half[rep] + u.length[p_of[n_i[rep]]] ** 2 * net.cell_kappa[cell] / 8.0
+    quad, axes, centre, radius, extent = band_pieces(lanes, r[rep], sa, sb, dl[rep] - half, dl[rep] + half,
+                                                     net.cell_turn[cell])
+    jr = j_i[rep]
+    keep = _near(centre, radius, jr, roi)
+    rep, quad, axes, centre, radius, extent, jr = (x[keep] for x in (rep, quad, axes, centre, radius, extent, jr))
+    natural = tr.natural[node[n_i[rep]]]
+    changed = (natural >= 0) & (member[rep] != natural)
+    return (np.concatenate([quad, quad], axis=1), np.concatenate([axes, axes], axis=1), centre, radius, extent, jr,
+            u.idx[p_of[n_i[rep]]], member[rep], changed)
 
 
 def _line_caps(net: Network, tr, t: float, iv: Intervals, node: np.ndarray, p_of: np.ndarray, members: np.ndarray,
-               kind: np.ndarray, table: list, front0: np.ndarray, v0: np.ndarray, v_cap: np.ndarray,
-               a_max: np.ndarray, v_sw: np.ndarray, stretch: np.ndarray) -> np.ndarray:
+               u: _Users) -> np.ndarray:
     """The path position [m] each node's users' front stays behind per interval (N, J) (+inf:
     none): per member lane the nearest line that holds them, per node the farthest over its
     members (a user who may change lanes goes round a line on one lane only)."""
@@ -368,15 +443,15 @@ def _line_caps(net: Network, tr, t: float, iv: Intervals, node: np.ndarray, p_of
     lkind = net.line_kind[q]
     x_line = tr.line_x[node]
     pp = p_of[:, None, None]
-    dist = x_line - front0[pp]
-    obey = np.where(lkind == STOP_SIGN, _flag(table, kind, "stop_lines")[pp], _flag(table, kind, "red_lights")[pp])
-    can_stop = v0[pp] ** 2 / (2 * a_max[pp]) * stretch[pp] <= dist
+    dist = x_line - u.front0[pp]
+    obey = np.where(lkind == STOP_SIGN, u.flag("stop_lines")[pp], u.flag("red_lights")[pp])
+    can_stop = u.v0[pp] ** 2 / (2 * u.a_max[pp]) * u.stretch[pp] <= dist
     li = net.line_index[q]
     n_stops = len(world.stops.ids)
     stop_time = world.stops.stop_time[np.minimum(li, n_stops - 1)] if n_stops else np.zeros(dist.shape)
-    standing = (lkind == STOP_SIGN) & (v0[pp] <= STANDING) & (dist <= STOP_ZONE)
+    standing = (lkind == STOP_SIGN) & (u.v0[pp] <= STANDING) & (dist <= STOP_ZONE)
     active = has & (dist >= 0) & obey & can_stop & ~standing
-    reach = time_to_travel(v0[pp], v_cap[pp], a_max[pp], v_sw[pp], dist / stretch[pp])
+    reach = time_to_travel(u.v0[pp], u.v_cap[pp], u.a_max[pp], u.v_sw[pp], dist / u.stretch[pp])
     free_at = np.where(active & (lkind == STOP_SIGN), reach + stop_time, np.inf)
     lit = active & (lkind == LIGHT)
     if lit.any():
@@ -388,37 +463,40 @@ def _line_caps(net: Network, tr, t: float, iv: Intervals, node: np.ndarray, p_of
     return np.maximum.reduce([cap_m[:, m] for m in range(cap_m.shape[1])])  # (N, J) farthest member
 
 
-def _flag(table: list, kind: np.ndarray, name: str) -> np.ndarray:
-    return np.array([bool(getattr(table[k], name)) for k in kind], dtype=bool)
-
-
-def _free_pieces(net: Network, traffic: TrafficState, iv: Intervals, idx: np.ndarray, sel: np.ndarray, v0: np.ndarray,
-                 a_max: np.ndarray, kind: np.ndarray, table: list) -> tuple | None:
-    """Octagons of the participants ``sel`` predicted freely (any heading)."""
-    if not len(sel) or iv.count == 0:
+def _free_pieces(net: Network, traffic: TrafficState, iv: Intervals, u: _Users, sel: np.ndarray,
+                 roi: tuple[np.ndarray, np.ndarray] | None) -> tuple | None:
+    """Octagons of the users ``sel`` predicted freely (any heading)."""
+    if not len(sel):
         return None
     world = net.world
-    g = idx[sel]
-    k = kind[sel]
+    g = u.idx[sel]
     # speed bound: a pedestrian's own; a vehicle's under the largest limit on the map
     limit = float(world.limits.value.max()) if len(world.limits.value) else 0.0
-    v_max = np.array([table[q].v_max if q == PEDESTRIAN else table[q].speed_cap(limit) for q in k])
-    v_cap = np.maximum(v0[sel], v_max)
+    v_max = np.array([u.table[q].v_max if q == PEDESTRIAN else u.table[q].speed_cap(limit) for q in u.kind[sel]])
+    v_cap = np.maximum(u.v0[sel], v_max)
     body = 0.5 * np.hypot(world.parts.length[g], world.parts.width[g])
     p0 = np.stack([traffic.x[g], traffic.y[g]], axis=1)
-    vel = v0[sel][:, None] * np.stack([np.cos(traffic.psi[g]), np.sin(traffic.psi[g])], axis=1)
+    vel = u.v0[sel][:, None] * np.stack([np.cos(traffic.psi[g]), np.sin(traffic.psi[g])], axis=1)
     t0, t1 = iv.t[:-1][None, :], iv.t[1:][None, :]  # (1, J)
-    am = a_max[sel][:, None]
-    drift0, drift1 = p0[:, None] + vel[:, None] * t0[..., None], p0[:, None] + vel[:, None] * t1[..., None]
+    am = u.a_max[sel][:, None]
     r_drift0, r_drift1 = 0.5 * am * t0**2, 0.5 * am * t1**2
     r_speed0, r_speed1 = v_cap[:, None] * t0, v_cap[:, None] * t1
-    use_drift = r_drift1 <= r_speed1  # the smaller disc at the end of the interval
-    c0 = np.where(use_drift[..., None], drift0, p0[:, None])
-    c1 = np.where(use_drift[..., None], drift1, p0[:, None])
-    r0 = np.where(use_drift, r_drift0, r_speed0) + body[:, None]
-    r1 = np.where(use_drift, r_drift1, r_speed1) + body[:, None]
-    octa, centre, radius = disc_hull_octagons(c0, r0, c1, r1)
+    drift = r_drift1 <= r_speed1  # the smaller disc at the end of the interval
+    c0 = p0[:, None] + drift[..., None] * vel[:, None] * t0[..., None]
+    c1 = p0[:, None] + drift[..., None] * vel[:, None] * t1[..., None]
+    r0 = np.where(drift, r_drift0, r_speed0) + body[:, None]
+    r1 = np.where(drift, r_drift1, r_speed1) + body[:, None]
     P, J = len(sel), iv.count
-    axes = np.broadcast_to(OCTAGON_NORMALS[:4], (P * J, 4, 2))
-    return (octa.reshape(-1, 8, 2), axes, centre.reshape(-1, 2), radius.ravel(), np.tile(np.arange(J), P),
-            np.repeat(g, J), np.full(P * J, -1), np.zeros(P * J, dtype=bool))
+    p_i, j_i = np.divmod(np.arange(P * J), J)
+    c0, c1, r0, r1 = c0.reshape(-1, 2), c1.reshape(-1, 2), r0.ravel(), r1.ravel()
+    if roi is not None:
+        half = 0.5 * np.hypot(*(c1 - c0).T)
+        keep = _near(0.5 * (c0 + c1), half + np.maximum(r0, r1) / np.cos(np.pi / 8), j_i, roi)
+        p_i, j_i, c0, c1, r0, r1 = p_i[keep], j_i[keep], c0[keep], c1[keep], r0[keep], r1[keep]
+        if not len(p_i):
+            return None
+    octa, centre, radius = disc_hull_octagons(c0, r0, c1, r1)
+    n = len(p_i)
+    axes = np.broadcast_to(OCTAGON_NORMALS[:4], (n, 4, 2))
+    return octa, axes, centre, radius, np.stack([radius, radius], axis=1), j_i, g[p_i], np.full(n, -1), \
+        np.zeros(n, dtype=bool)

@@ -22,7 +22,7 @@ import numpy as np
 
 from twolevel.world.geometry import LaneSet
 
-__all__ = ["band_pieces", "disc_hull_octagons", "edge_axes", "rect_axes", "intersects", "overlaps",
+__all__ = ["band_pieces", "lane_point", "disc_hull_octagons", "edge_axes", "rect_axes", "intersects", "overlaps",
            "OCTAGON_NORMALS"]
 
 OCTAGON_NORMALS = np.stack([np.cos(np.arange(8) * np.pi / 4), np.sin(np.arange(8) * np.pi / 4)], axis=1)
@@ -33,43 +33,61 @@ def band_pieces(lanes: LaneSet, lane: np.ndarray, a: np.ndarray, b: np.ndarray, 
                 lat_hi: np.ndarray, turn: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Rectangles containing the points at arc length s ∈ [a, b] [m] and lateral offset
     λ ∈ [lat_lo, lat_hi] [m] (+ left) of lane ``lane``, where the centre line turns by at most
-    ``turn`` [rad] (< π/2) monotonically over [a, b] (one :mod:`~twolevel.safety.network` cell).
+    ``turn`` [rad] monotonically over [a, b] (one :mod:`~twolevel.safety.network` cell: small
+    turns along a stretch, or a polyline's corner of any angle up to π at one point).
 
     In the frame of the chord from C(a) to C(b) (length c; u along, v across): a convex arc with
     its heading within ``turn`` of the chord lies within the triangle of the chord and the end
     tangents, so |v| ≤ (c/2)·tan(turn/2); its projection on u stays in [0, c]; the normal at
-    every point is within ``turn`` of the chord's normal, so λ·n(s) adds λ·cos φ across (within
-    [min(lo, lo·cos t), max(hi, hi·cos t)]) and at most max(|lo|, |hi|)·sin t along. Exact for a
-    straight piece (turn = 0); beyond the lane's ends the centre line continues straight.
+    every point turns by φ ≤ t from the chord's normal, so λ·n(s) adds λ·cos φ across (between
+    its values at φ = 0 and φ = t, λ ∈ {lo, hi}) and at most max(|lo|, |hi|)·sin(min(t, π/2))
+    along. Exact for a straight piece (turn = 0); beyond the lane's ends the centre line continues
+    straight.
 
     ``lat_lo``/``lat_hi`` are (N,) or (N, M) (M bands across the same stretch: the frame is
     computed once). Returns the corners (N[, M], 4, 2) [m] (counter-clockwise from the rear
-    right), the two edge normals (N[, M], 2, 2), the centre (N[, M], 2) [m] and the half
-    diagonal (N[, M]) [m]."""
+    right), the two edge normals (N[, M], 2, 2), the centre (N[, M], 2) [m], the half diagonal
+    (N[, M]) [m] and the half sizes of the axis-aligned bounding box (N[, M], 2) [m]."""
     lane = np.asarray(lane, dtype=int)
-    pa, ha = lanes.pose(lane, np.asarray(a, dtype=float))
-    pb, _ = lanes.pose(lane, np.asarray(b, dtype=float))
+    pa, ha = lane_point(lanes, lane, np.asarray(a, dtype=float))
+    pb, _ = lane_point(lanes, lane, np.asarray(b, dtype=float))
     d = pb - pa
     c = np.hypot(d[:, 0], d[:, 1])
     fallback = np.stack([np.cos(ha), np.sin(ha)], axis=1)
     u = np.where((c > 1e-9)[:, None], d / np.maximum(c, 1e-12)[:, None], fallback)
     v = np.stack([-u[:, 1], u[:, 0]], axis=1)
-    t = np.minimum(np.asarray(turn, dtype=float), 1.5)
+    t = np.minimum(np.asarray(turn, dtype=float), np.pi)
     lo, hi = np.asarray(lat_lo, dtype=float), np.asarray(lat_hi, dtype=float)
     wide = lo.ndim == 2
     if wide:  # one frame, M bands
         c, t, pa, u, v = c[:, None], t[:, None], pa[:, None], u[:, None], v[:, None]
-    dev = 0.5 * c * np.tan(0.5 * t)
-    over = np.maximum(np.abs(lo), np.abs(hi)) * np.sin(t)
-    v_lo = np.minimum(lo, lo * np.cos(t)) - dev
-    v_hi = np.maximum(hi, hi * np.cos(t)) + dev
+    dev = 0.5 * c * np.tan(0.5 * np.minimum(t, 1.5))  # (a long stretch turns little: see the cells)
+    over = np.maximum(np.abs(lo), np.abs(hi)) * np.sin(np.minimum(t, 0.5 * np.pi))
+    cos = np.cos(t)
+    v_lo = np.minimum(np.minimum(lo, lo * cos), hi * cos) - dev
+    v_hi = np.maximum(np.maximum(hi, hi * cos), lo * cos) + dev
     u_lo, u_hi = -over, c + over
     corners_u = np.stack([u_lo, u_hi, u_hi, u_lo], axis=-1)  # counter-clockwise from rear right
     corners_v = np.stack([v_lo, v_lo, v_hi, v_hi], axis=-1)
     quad = pa[..., None, :] + corners_u[..., None] * u[..., None, :] + corners_v[..., None] * v[..., None, :]
     centre = pa + (0.5 * (u_lo + u_hi))[..., None] * u + (0.5 * (v_lo + v_hi))[..., None] * v
     axes = np.broadcast_to(np.stack([v, u], axis=-2), quad.shape[:-2] + (2, 2))
-    return quad, axes, centre, 0.5 * np.hypot(u_hi - u_lo, v_hi - v_lo)
+    hu, hv = 0.5 * (u_hi - u_lo), 0.5 * (v_hi - v_lo)
+    extent = np.abs(u) * hu[..., None] + np.abs(v) * hv[..., None]
+    return quad, axes, centre, np.hypot(hu, hv), extent
+
+
+def lane_point(lanes: LaneSet, lane: np.ndarray, s: np.ndarray, lateral: np.ndarray | float = 0.0
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Points (N, 2) [m] and headings (N,) [rad] of ``lane`` at arc length ``s`` [m] and
+    ``lateral`` offset [m] (+ left), the lane continued straight along its end headings beyond
+    either end."""
+    lane = np.asarray(lane, dtype=int)
+    s = np.asarray(s, dtype=float)
+    inside = np.clip(s, 0.0, lanes.length[lane])
+    p, h = lanes.pose(lane, inside, lateral)
+    beyond = s - inside
+    return p + beyond[:, None] * np.stack([np.cos(h), np.sin(h)], axis=1), h
 
 
 def disc_hull_octagons(c0: np.ndarray, r0: np.ndarray, c1: np.ndarray, r1: np.ndarray
@@ -114,8 +132,9 @@ def intersects(pa: np.ndarray, axa: np.ndarray, pb: np.ndarray, axb: np.ndarray)
     shape = np.broadcast_shapes(axa.shape[:-2], axb.shape[:-2])
     axes = np.concatenate([np.broadcast_to(axa, shape + axa.shape[-2:]), np.broadcast_to(axb, shape + axb.shape[-2:])],
                           axis=-2)
-    qa = np.einsum("...kd,...pd->...kp", axes, pa)
-    qb = np.einsum("...kd,...pd->...kp", axes, pb)
+    ax, ay = axes[..., :, 0:1], axes[..., :, 1:2]  # (..., K, 1)
+    qa = ax * pa[..., None, :, 0] + ay * pa[..., None, :, 1]  # (..., K, P)
+    qb = ax * pb[..., None, :, 0] + ay * pb[..., None, :, 1]
     return np.all((qa.max(-1) >= qb.min(-1)) & (qb.max(-1) >= qa.min(-1)), axis=-1)
 
 

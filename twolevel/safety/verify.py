@@ -128,7 +128,8 @@ class Verdict:
     """The outcome of one verification: ``verified``; the ``failsafe`` that passed (None if none
     did), from the state after the intended step (or from the state itself for an initial check);
     ``refutations`` of the fail-safes that failed before it (all of them when none passed);
-    ``horizon`` [s] the occupancy covered; ``participants``: how many were predicted;
+    ``horizon`` [s] the occupancy covered; ``participants``: how many could come near the ego's
+    trajectories (had a piece of occupancy within their region);
     ``timings_ms``: ``step`` (the intended step's rollout), ``failsafe``, ``prediction``,
     ``check``, ``total``."""
 
@@ -176,11 +177,13 @@ def context(world: World, params: VehicleParams | None = None, settings: VerifyS
 
 @dataclass
 class _Prediction:
-    """The occupancy computed so far in one verification (extended when a longer horizon is
-    needed)."""
+    """The occupancy computed so far in one verification, for the participants ``include`` (N,)
+    and the region of interest ``roi`` (a circle per interval) it was cut to; recomputed when a
+    trajectory needs a longer horizon or leaves the region."""
 
+    include: np.ndarray
     occ: Occupancy | None = None
-    reach: float = 0.0
+    roi: tuple[np.ndarray, np.ndarray] | None = None
     ms: float = 0.0
 
 
@@ -228,15 +231,30 @@ def _excluded(ctx: Context, traffic: TrafficState, s_ego: float, e_ego: float) -
     return follower, protected
 
 
-def _sweeps(states: np.ndarray, iv: Intervals, length: float, width: float, margin: float
-            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
-    """The ego's swept region per interval, as the corners of its boxes at every sample within
-    (J, S·4, 2), the axes of the boxes at both ends (J, 4, 2), a bounding circle (J, 2), (J,), and
-    the number of intervals up to the end of the trajectory ``states`` (T, 12) (one sample per
-    control step, from the verification time)."""
+@dataclass(frozen=True, eq=False)
+class _Sweep:
+    """The ego's swept region per interval along a trajectory: the corners of its boxes at every
+    sample within (J, S·4, 2), the axes of the boxes at both ends (J, 4, 2), a bounding circle
+    ``centre`` (J, 2) / ``radius`` (J,) [m] and the half sizes ``extent`` (J, 2) [m] of its
+    axis-aligned bounding box about the same centre; J intervals reach the trajectory's last
+    sample."""
+
+    points: np.ndarray
+    axes: np.ndarray
+    centre: np.ndarray
+    radius: np.ndarray
+    extent: np.ndarray
+
+    @property
+    def count(self) -> int:
+        return len(self.radius)
+
+
+def _sweep(states: np.ndarray, iv: Intervals, length: float, width: float, margin: float) -> _Sweep:
+    """The sweep of ``states`` (T, 12), one sample per control step from the verification time,
+    over the intervals ``iv`` that reach its last sample."""
     T = len(states)
-    J = int(np.searchsorted(iv.k, T - 1, side="left"))  # intervals up to the last sample
-    J = max(1, min(J, iv.count))
+    J = max(1, min(int(np.searchsorted(iv.k, T - 1, side="left")), iv.count))
     boxes = box_corners(states[:, 0], states[:, 1], states[:, 2], length + 2 * margin, width + 2 * margin)
     S = int(np.max(np.diff(iv.k[: J + 1]))) + 1
     k = iv.k[:J, None] + np.arange(S)[None, :]
@@ -244,25 +262,24 @@ def _sweeps(states: np.ndarray, iv: Intervals, length: float, width: float, marg
     pts = boxes[k].reshape(J, S * 4, 2)
     ends = np.concatenate([rect_axes(boxes[np.minimum(iv.k[:J], T - 1)]),
                            rect_axes(boxes[np.minimum(iv.k[1:J + 1], T - 1)])], axis=1)
-    centre = 0.5 * (pts.max(axis=1) + pts.min(axis=1))
-    radius = np.sqrt(((pts - centre[:, None, :]) ** 2).sum(-1).max(axis=1))
-    return pts, ends, centre, radius, J
+    lo = np.minimum.reduce([pts[:, i] for i in range(pts.shape[1])])
+    hi = np.maximum.reduce([pts[:, i] for i in range(pts.shape[1])])
+    centre = 0.5 * (lo + hi)
+    return _Sweep(pts, ends, centre, 0.5 * np.hypot(*(hi - lo).T), 0.5 * (hi - lo))
 
 
-def _first_collision(occ: Occupancy, checked: np.ndarray, states: np.ndarray, ctx: Context) -> int | None:
-    """Index of the occupancy polygon that refutes the trajectory ``states`` earliest (None: none)."""
-    st = ctx.settings
-    pts, axes, centre, radius, J = _sweeps(states, occ.intervals, ctx.params.length, ctx.params.width, st.margin)
-    sel = np.flatnonzero(checked & (occ.interval < J))
+def _first_collision(occ: Occupancy, checked: np.ndarray, sw: _Sweep) -> int | None:
+    """Index of the occupancy polygon that meets the sweep earliest (None: none does)."""
+    sel = np.flatnonzero(checked & (occ.interval < sw.count))
     if not len(sel):
         return None
     j = occ.interval[sel]
-    d = occ.centre[sel] - centre[j]
-    near = d[:, 0] ** 2 + d[:, 1] ** 2 <= (occ.radius[sel] + radius[j]) ** 2
+    d = np.abs(occ.centre[sel] - sw.centre[j]) <= occ.extent[sel] + sw.extent[j]  # bounding boxes meet
+    near = d[:, 0] & d[:, 1]
     cand, j = sel[near], j[near]
     if not len(cand):
         return None
-    hit = intersects(pts[j], axes[j], occ.points[cand], occ.axes[cand])
+    hit = intersects(sw.points[j], sw.axes[j], occ.points[cand], occ.axes[cand])
     if not hit.any():
         return None
     order = np.lexsort((cand[hit], j[hit]))
@@ -276,12 +293,11 @@ def _standstill_lane(ctx: Context, state: np.ndarray) -> int | None:
         return None
     m = ctx.settings.margin
     box = box_corners(state[0], state[1], state[2], ctx.params.length + 2 * m, ctx.params.width + 2 * m)
-    centre = net.foreign.mean(axis=1)
     reach = 0.5 * math.hypot(ctx.params.length, ctx.params.width) + m + CELL_REACH
-    near = np.flatnonzero(np.hypot(centre[:, 0] - state[0], centre[:, 1] - state[1]) <= reach)
+    near = np.flatnonzero(np.hypot(net.foreign_centre[:, 0] - state[0], net.foreign_centre[:, 1] - state[1]) <= reach)
     if not len(near):
         return None
-    hit = intersects(box[None], rect_axes(box[None]), net.foreign[near], rect_axes(net.foreign[near]))
+    hit = intersects(box[None], rect_axes(box[None]), net.foreign[near], net.foreign_axes[near])
     return int(net.foreign_lane[near[np.argmax(hit)]]) if hit.any() else None
 
 
@@ -289,95 +305,129 @@ CELL_REACH = 40.0
 """Bound on a foreign quad's half diagonal [m] (cells are at most 50 m long; lanes ≤ 10 m wide)."""
 
 
-def _reach(ctx: Context, states: np.ndarray) -> float:
-    """How far the ego's body gets from its first position along ``states`` [m]."""
-    x0 = states[0, :2]
-    return (float(np.max(np.hypot(states[:, 0] - x0[0], states[:, 1] - x0[1])))
-            + 0.5 * math.hypot(ctx.params.length, ctx.params.width) + ctx.settings.margin)
+_NOWHERE = 1e12  # [m] the centre of an empty region of interest
 
 
-def _include(ctx: Context, traffic: TrafficState, x0: np.ndarray, reach: float, horizon: float) -> np.ndarray:
-    """Participants that could come within ``reach`` [m] of ``x0`` within ``horizon`` [s] (N,):
-    their speed bound (or their speed, if faster) × horizon."""
-    w = ctx.world
-    a = w.assumptions
-    limit = float(w.limits.value.max()) if len(w.limits.value) else 0.0
-    cap = np.array([a.bounds(k).speed_cap(limit) for k in range(3)])[ctx.kinds]
-    v_cap = np.maximum(traffic.v, cap)
-    body = 0.5 * np.hypot(w.parts.length, w.parts.width)
-    dist = np.hypot(traffic.x - x0[0], traffic.y - x0[1])
-    return traffic.active & (dist - body <= reach + v_cap * horizon)
+def _covers(roi: tuple[np.ndarray, np.ndarray], sw: _Sweep) -> bool:
+    """Whether every interval's circle of the sweep lies within the region of interest."""
+    c, r = roi
+    d = np.hypot(*(sw.centre - c[: sw.count]).T)
+    return bool(np.all(d + sw.radius <= r[: sw.count] + 1e-9))
 
 
-def _predict(ctx: Context, pred: _Prediction, traffic: TrafficState, t: float, states: np.ndarray, horizon: float
-             ) -> Occupancy:
-    """The occupancy up to ``horizon`` [s] of everyone who could come near ``states`` (computed,
-    or recomputed with some headroom when a longer or farther trajectory needs more)."""
+def _union(iv: Intervals, circles: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    """A circle per interval containing every given circle of that interval (each a pair of
+    centres (≤ J, 2) and radii (≤ J,), for the first intervals; none: far away)."""
+    J = iv.count
+    c = np.full((len(circles), J, 2), np.nan)
+    r = np.full((len(circles), J), np.nan)
+    for i, (ci, ri) in enumerate(circles):  # a handful
+        n = min(len(ri), J)
+        c[i, :n], r[i, :n] = ci[:n], ri[:n]
+    n = (~np.isnan(r)).sum(axis=0)
+    centre = np.nansum(c, axis=0) / np.maximum(n, 1)[:, None]
+    reach = np.hypot(*(c - centre[None]).transpose(2, 0, 1)) + r
+    radius = np.where(np.isnan(reach), -np.inf, reach).max(axis=0)
+    return np.where((n > 0)[:, None], centre, _NOWHERE), np.where(n > 0, radius, 0.0)
+
+
+_SLACK = 1.0
+"""Lateral slack [m] of the braking envelope around the route (a fail-safe tracks it within cm)."""
+
+
+def _envelope(ctx: Context, iv: Intervals, start: tuple[float, float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """Circles per interval around the stretch of route between where braking harder than the
+    car can (1.2 × full braking) and where not braking at all would put the ego, from route
+    position s [m] at speed v [m/s] at time t [s] after the verification time (``start``): every
+    braking fail-safe from there lies within them, so one prediction serves them all."""
+    s, v, t0 = start
+    r = ctx.world.route
+    t_a = np.maximum(iv.t[:-1] - t0, 0.0)
+    t_b = np.maximum(iv.t[1:] - t0, 0.0)
+    hard = 1.2 * ctx.brake_full
+    lo = s + np.where(t_a < v / hard, v * t_a - 0.5 * hard * t_a**2, v**2 / (2 * hard))
+    hi = s + v * t_b
+    mid = r.position(0.5 * (lo + hi))
+    body = 0.5 * math.hypot(ctx.params.length, ctx.params.width) + ctx.settings.margin + _SLACK
+    return mid, 0.5 * (hi - lo) + body
+
+
+def _predict(ctx: Context, pred: _Prediction, traffic: TrafficState, t: float, trajectories: list[np.ndarray],
+             brake_from: tuple[float, float, float] | None = None) -> tuple[Occupancy, list[_Sweep]]:
+    """The occupancy, near enough to the ego's ``trajectories`` and long enough for them (computed,
+    or recomputed for all of them together when one is not covered), and their sweeps. With
+    ``brake_from``, a new prediction also covers every braking fail-safe from there
+    (:func:`_envelope`)."""
+    st, dt = ctx.settings, ctx.world.settings.dt
+    size = (ctx.params.length, ctx.params.width, st.margin)
+    horizon = max((len(x) - 1) * dt for x in trajectories)
     have = pred.occ
-    reach = _reach(ctx, states)
-    if have is not None and have.intervals.t[-1] >= horizon - 1e-9 and pred.reach >= reach:
-        return have
+    if have is not None and have.intervals.t[-1] >= horizon - 1e-9:
+        sweeps = [_sweep(x, have.intervals, *size) for x in trajectories]
+        if all(_covers(pred.roi, sw) for sw in sweeps):  # type: ignore[arg-type]
+            return have, sweeps
     t0 = time.perf_counter()
-    st = ctx.settings
-    grow = 1.2 if have is not None else 1.0
-    if have is not None:
-        horizon, reach = max(horizon, float(have.intervals.t[-1])) * grow, max(reach, pred.reach) * grow
-    iv = Intervals.make(ctx.world.settings.dt, horizon, st.fine, st.coarse)
-    include = _include(ctx, traffic, states[0, :2], reach, float(iv.t[-1]))
-    pred.occ = predict(ctx.network, traffic, t, iv, ctx.world.assumptions, ctx.kinds, include)
-    pred.reach = reach
+    iv = Intervals.make(dt, horizon, st.fine, st.coarse)
+    sweeps = [_sweep(x, iv, *size) for x in trajectories]
+    circles = [(sw.centre, sw.radius) for sw in sweeps]
+    if brake_from is not None:
+        circles.append(_envelope(ctx, iv, brake_from))
+    roi = _union(iv, circles)
+    pred.occ = predict(ctx.network, traffic, t, iv, ctx.world.assumptions, ctx.kinds, pred.include, roi)
+    pred.roi = roi
     pred.ms += (time.perf_counter() - t0) * 1e3
-    return pred.occ
+    return pred.occ, sweeps
 
 
-def _judge(ctx: Context, pred: _Prediction, traffic: TrafficState, t: float, prefix: np.ndarray, fs: FailSafe,
-           checked_of: Callable[[Occupancy], np.ndarray], tm: dict[str, float]) -> Refutation | None:
-    """None if the trajectory ``prefix`` (the intended steps' states, without the fail-safe's
-    start) followed by the fail-safe ``fs`` passes; else why not."""
-    if not fs.stopped:
-        return Refutation(fs.name, "no_stop")
-    states = np.concatenate([prefix, fs.states])
-    dt = ctx.world.settings.dt
-    occ = _predict(ctx, pred, traffic, t, states, (len(states) - 1) * dt)
-    t0 = time.perf_counter()
-    hit = _first_collision(occ, checked_of(occ), states, ctx)
-    lane = None if hit is not None else _standstill_lane(ctx, fs.states[-1])
-    tm["check"] = tm.get("check", 0.0) + (time.perf_counter() - t0) * 1e3
+def _judge(ctx: Context, occ: Occupancy, sw: _Sweep, fs: FailSafe, checked: np.ndarray) -> Refutation | None:
+    """None if the trajectory of sweep ``sw`` (the intended steps, then the fail-safe ``fs``)
+    passes; else why not."""
+    hit = _first_collision(occ, checked, sw)
     if hit is not None:
         j = int(occ.interval[hit])
         return Refutation(fs.name, "collision", ctx.world.parts.ids[int(occ.owner[hit])],
                           float(occ.intervals.t[j]), float(occ.intervals.t[j + 1]))
+    lane = _standstill_lane(ctx, fs.states[-1])
     if lane is not None:
         return Refutation(fs.name, "standstill", lane=ctx.world.lanes.lanes[lane].id)
     return None
 
 
 def _verify(ctx: Context, x_start: np.ndarray, prefix: np.ndarray, traffic: TrafficState, t: float,
-            s_hint: float | None, tm: dict[str, float], pred: _Prediction) -> tuple[FailSafe | None, list[Refutation]]:
+            s_hint: float | None, tm: dict[str, float], pred: _Prediction | None
+            ) -> tuple[FailSafe | None, list[Refutation], _Prediction]:
     """Try the fail-safes from ``x_start`` after the ``prefix`` states; the first that passes."""
     w, st = ctx.world, ctx.settings
     s, e = _route_state(ctx, x_start, s_hint)
     follower, protected = _excluded(ctx, traffic, s, e)
-
-    def checked_of(occ: Occupancy) -> np.ndarray:
-        cut_in = occ.changed & np.isin(occ.lane, list(protected)) if protected else np.zeros(len(occ.lane), bool)
-        return ~follower[occ.owner] & ~cut_in
-
+    if pred is None or not np.array_equal(pred.include, ~follower):
+        pred = _Prediction(~follower)
     plan = manoeuvres(st.failsafe, ctx.network.zones, s, max(float(x_start[3]), 0.0), ctx.brake_full)
     refuted: list[Refutation] = []
-    batches = [plan[:1], plan[1:]]  # the gentlest alone (usually enough), then the others together
-    for batch in batches:
+    for batch in (plan[:1], plan[1:]):  # the gentlest alone (usually enough), then the others together
         if not batch:
             continue
         t0 = time.perf_counter()
         fss = roll(x_start, batch, w.route, s, w.settings.dt, ctx.params, st.failsafe, st.backend)
         tm["failsafe"] = tm.get("failsafe", 0.0) + (time.perf_counter() - t0) * 1e3
-        for fs in fss:
-            why = _judge(ctx, pred, traffic, t, prefix, fs, checked_of, tm)
+        stopped = [fs for fs in fss if fs.stopped]
+        refuted += [Refutation(fs.name, "no_stop") for fs in fss if not fs.stopped]
+        if not stopped:
+            continue
+        occ, sweeps = _predict(ctx, pred, traffic, t, [np.concatenate([prefix, fs.states]) for fs in stopped],
+                               (s, max(float(x_start[3]), 0.0), len(prefix) * w.settings.dt))
+        t0 = time.perf_counter()
+        checked = np.ones(len(occ.lane), dtype=bool)
+        if protected:  # cut-ins into the ego's lanes are the cutter's duty
+            checked = ~(occ.changed & np.isin(occ.lane, list(protected)))
+        for fs, sw in zip(stopped, sweeps):
+            why = _judge(ctx, occ, sw, fs, checked)
             if why is None:
-                return fs, refuted
+                tm["check"] = tm.get("check", 0.0) + (time.perf_counter() - t0) * 1e3
+                return fs, refuted, pred
             refuted.append(why)
-    return None, refuted
+        tm["check"] = tm.get("check", 0.0) + (time.perf_counter() - t0) * 1e3
+    return None, refuted, pred
 
 
 def _verdict(ctx: Context, fs: FailSafe | None, refuted: list[Refutation], pred: _Prediction, tm: dict[str, float],
@@ -386,7 +436,8 @@ def _verdict(ctx: Context, fs: FailSafe | None, refuted: list[Refutation], pred:
     tm["total"] = (time.perf_counter() - t_start) * 1e3
     occ = pred.occ
     horizon = float(occ.intervals.t[-1]) if occ is not None else 0.0
-    return Verdict(fs is not None, fs, tuple(refuted), horizon, len(occ.predicted) if occ is not None else 0, tm)
+    near = len(np.unique(occ.owner)) if occ is not None else 0
+    return Verdict(fs is not None, fs, tuple(refuted), horizon, near, tm)
 
 
 def verify_step(ctx: Context, x0: np.ndarray, control: np.ndarray, traffic: TrafficState, t: float,
@@ -401,8 +452,7 @@ def verify_step(ctx: Context, x0: np.ndarray, control: np.ndarray, traffic: Traf
     x1 = rollout(x0, np.asarray(control, dtype=float).reshape(1, 1, 2), ctx.world.settings.dt, ctx.params,
                  ctx.settings.backend).states[0, 1]
     tm["step"] = (time.perf_counter() - t_start) * 1e3
-    pred = _Prediction()
-    fs, refuted = _verify(ctx, x1, x0[None], traffic, t, s_hint, tm, pred)
+    fs, refuted, pred = _verify(ctx, x1, x0[None], traffic, t, s_hint, tm, None)
     return _verdict(ctx, fs, refuted, pred, tm, t_start)
 
 
@@ -412,8 +462,7 @@ def verify_initial_state(ctx: Context, x0: np.ndarray, traffic: TrafficState, t:
     starts unsafe is reported by a refuted verdict)."""
     t_start = time.perf_counter()
     tm: dict[str, float] = {}
-    pred = _Prediction()
-    fs, refuted = _verify(ctx, np.asarray(x0, dtype=float), np.zeros((0, 12)), traffic, t, s_hint, tm, pred)
+    fs, refuted, pred = _verify(ctx, np.asarray(x0, dtype=float), np.zeros((0, 12)), traffic, t, s_hint, tm, None)
     return _verdict(ctx, fs, refuted, pred, tm, t_start)
 
 
@@ -427,11 +476,11 @@ def time_to_react(ctx: Context, x0: np.ndarray, plan: np.ndarray, traffic: Traff
     plan = np.asarray(plan, dtype=float).reshape(-1, 2)
     H = len(plan)
     xs = rollout(np.asarray(x0, dtype=float), plan[None], dt, ctx.params, ctx.settings.backend).states[0]  # (H+1, 12)
-    pred = _Prediction()
     tm: dict[str, float] = {}
+    cache: list[_Prediction | None] = [None]
 
     def ok(k: int) -> bool:
-        fs, _ = _verify(ctx, xs[k], xs[:k], traffic, t, s_hint, tm, pred)
+        fs, _, cache[0] = _verify(ctx, xs[k], xs[:k], traffic, t, s_hint, tm, cache[0])
         return fs is not None
 
     if ok(H):
