@@ -44,7 +44,6 @@ Units: m, s, m/s, m/s².
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass
 
@@ -261,10 +260,18 @@ class _Users:
 _COLUMNS = ("v_max", "speed_factor", "a_max", "v_switch", "lane_bound", "lane_changes", "stop_lines", "red_lights")
 
 
-@functools.lru_cache(maxsize=8)
+_TABLES: list[tuple[Assumptions, np.ndarray]] = []
+
+
 def _bounds_table(a: Assumptions) -> np.ndarray:
-    """The bounds of each kind of road user as a table (3, 8), columns :data:`_COLUMNS`."""
-    return np.array([[float(getattr(a.bounds(k), c)) for c in _COLUMNS] for k in range(3)])
+    """The bounds of each kind of road user as a table (3, 8), columns :data:`_COLUMNS` (the last
+    few kept: the same assumptions come with every call of one world)."""
+    for have, table in _TABLES:
+        if have is a:
+            return table
+    table = np.array([[float(getattr(a.bounds(k), c)) for c in _COLUMNS] for k in range(3)])
+    _TABLES[:] = [(a, table)] + _TABLES[:3]
+    return table
 
 
 def predict(net: Network, traffic: TrafficState, t: float, intervals: Intervals, assumptions: Assumptions,
@@ -409,10 +416,9 @@ def _tree_pieces(net: Network, tr, t: float, iv: Intervals, u: _Users, who: np.n
     r = ref[n_i]
     pa, pb = a[n_i, j_i], b[n_i, j_i]
     # --- cut at the cells into quads -------------------------------------------------------
-    c_lo = np.clip(np.searchsorted(net.cell_key, lanes.base[r] + pa, side="right") - 1, net.cell_ptr[r],
-                   net.cell_ptr[r + 1] - 1)
-    c_hi = np.clip(np.searchsorted(net.cell_key, lanes.base[r] + pb, side="right") - 1, net.cell_ptr[r],
-                   net.cell_ptr[r + 1] - 1)
+    first_c, last_c = net.cell_ptr[r], net.cell_ptr[r + 1] - 1
+    c_lo = np.minimum(np.maximum(np.searchsorted(net.cell_key, lanes.base[r] + pa, side="right") - 1, first_c), last_c)
+    c_hi = np.minimum(np.maximum(np.searchsorted(net.cell_key, lanes.base[r] + pb, side="right") - 1, first_c), last_c)
     c_hi = np.maximum(c_hi, c_lo)
     n_c = c_hi - c_lo + 1
     rep = np.repeat(np.arange(len(r)), n_c)
