@@ -37,7 +37,7 @@ import numpy as np
 from twolevel.safety.polygons import band_pieces, overlaps, rect_axes
 from twolevel.world.world import World
 
-__all__ = ["Network", "LaneTrees", "network_of", "REACH", "CELL_TURN", "CELL_LENGTH", "STOP_SIGN", "LIGHT"]
+__all__ = ["Network", "LaneTrees", "network_of", "REACH", "CELL_TURN", "CELL_LENGTH", "KINK", "STOP_SIGN", "LIGHT"]
 
 REACH = 1500.0
 """Depth of the lane trees [m] (a participant whose reach goes beyond is predicted freely)."""
@@ -47,6 +47,8 @@ CELL_TURN = 0.08
 """Largest heading change within a cell [rad]."""
 CELL_LENGTH = 50.0
 """Longest cell [m]."""
+KINK = 4.0
+"""The turn [rad] that marks a kink cell (its band is bounded by discs around its ends)."""
 BODY_REACH = 10.0
 """Half a long vehicle [m]: a body on a cell may reach this far into the neighbouring ones."""
 STOP_SIGN, LIGHT = 0, 1
@@ -180,7 +182,9 @@ def _cells(world: World) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray
     """Cut every lane into convex cells (heading monotone, turning ≤ CELL_TURN, at most
     CELL_LENGTH long; cuts at vertices, a long straight interval split evenly; a polyline's
     corner — the heading jumping at one point — is a cell of its own, of zero length, turning by
-    the jump): ptr (L+1,), s0, s1 [m] and the turn [rad] within each cell."""
+    the jump; a kink — an interval running more than 45° off its ends' headings, as a lane offset
+    to the inside of a sharp corner does — is a cell of its own marked :data:`KINK`): ptr (L+1,),
+    s0, s1 [m] and the turn [rad] within each cell."""
     lane_of, s0, s1, turn = [], [], [], []
 
     def close(i: int, a: float, b: float, t: float) -> None:
@@ -189,12 +193,18 @@ def _cells(world: World) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray
     for i, lane in enumerate(world.lanes.lanes):
         s, h = lane.s, lane.heading
         start, lo, hi, sign = 0, h[0], h[0], 0.0
+        pts = lane.points
         for k in range(1, len(s)):
             dh = h[k] - h[k - 1]
-            if s[k] - s[k - 1] <= 1e-9 and abs(dh) > 1e-12:  # a corner
+            d = pts[k] - pts[k - 1]
+            chord = math.atan2(d[1], d[0])
+            off = max(abs((chord - h[k - 1] + math.pi) % (2 * math.pi) - math.pi),
+                      abs((chord - h[k] + math.pi) % (2 * math.pi) - math.pi))
+            kink = s[k] - s[k - 1] > 1e-9 and off > math.pi / 4
+            if (s[k] - s[k - 1] <= 1e-9 and abs(dh) > 1e-12) or kink:  # a corner
                 if k - 1 > start:
                     close(i, s[start], s[k - 1], hi - lo)
-                close(i, s[k], s[k], abs(dh))
+                close(i, s[k - 1] if kink else s[k], s[k], KINK if kink else abs(dh))
                 start, lo, hi, sign = k, h[k], h[k], 0.0
                 continue
             sgn = math.copysign(1.0, dh) if abs(dh) > 1e-12 else 0.0

@@ -42,7 +42,9 @@ def band_pieces(lanes: LaneSet, lane: np.ndarray, a: np.ndarray, b: np.ndarray, 
     every point turns by φ ≤ t from the chord's normal, so λ·n(s) adds λ·cos φ across (between
     its values at φ = 0 and φ = t, λ ∈ {lo, hi}) and at most max(|lo|, |hi|)·sin(min(t, π/2))
     along. Exact for a straight piece (turn = 0); beyond the lane's ends the centre line continues
-    straight.
+    straight. A turn ≥ π marks a kink (a stretch running off its own headings, where nothing is
+    known of the normals): its piece is the rectangle around the chord grown by max(|lo|, |hi|)
+    on every side, which holds the discs of that radius about every point of the chord.
 
     ``lat_lo``/``lat_hi`` are (N,) or (N, M) (M bands across the same stretch: the frame is
     computed once). Returns the corners (N[, M], 4, 2) [m] (counter-clockwise from the rear
@@ -66,6 +68,11 @@ def band_pieces(lanes: LaneSet, lane: np.ndarray, a: np.ndarray, b: np.ndarray, 
     cos = np.cos(t)
     v_lo = np.minimum(np.minimum(lo, lo * cos), hi * cos) - dev
     v_hi = np.maximum(np.maximum(hi, hi * cos), lo * cos) + dev
+    kink = t >= np.pi - 1e-12
+    if np.any(kink):
+        big = np.maximum(np.abs(lo), np.abs(hi))
+        v_lo, v_hi = np.where(kink, -big, v_lo), np.where(kink, big, v_hi)
+        over = np.where(kink, big, over)
     u_lo, u_hi = -over, c + over
     corners_u = np.stack([u_lo, u_hi, u_hi, u_lo], axis=-1)  # counter-clockwise from rear right
     corners_v = np.stack([v_lo, v_lo, v_hi, v_hi], axis=-1)
