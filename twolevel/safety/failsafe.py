@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from twolevel.models.actuation import gamma_from_accel
+from twolevel.models.actuation import accel_from_gamma, gamma_from_accel
 from twolevel.models.params import VehicleParams
 from twolevel.models.rollout import Backend, rollout
 from twolevel.world.geometry import Route
@@ -141,8 +141,6 @@ def _wrap(a: np.ndarray) -> np.ndarray:
 @functools.lru_cache(maxsize=16)
 def brake_rate(params: VehicleParams) -> float:
     """Full braking's deceleration [m/s²] (γ = −1, quasi-static, at low speed)."""
-    from twolevel.models.actuation import accel_from_gamma
-
     return float(-accel_from_gamma(-1.0, 0.0, params))
 
 

@@ -81,7 +81,7 @@ class VerifySettings:
     margin: float = 0.1
     fine: float = 2.0
     coarse: int = 3
-    lane_tolerance: float = 0.2
+    lane_tolerance: float = 0.0
     failsafe: FailSafeSettings = FailSafeSettings()
     backend: Backend = "auto"
 
@@ -104,9 +104,9 @@ class Context:
 @dataclass(frozen=True)
 class Refutation:
     """Why one fail-safe failed: ``reason`` is ``collision`` (with ``participant`` over the
-    interval [``t0``, ``t1``] [s] after the verification time; ``step`` when it is the intended
-    step itself, [0, dt]), ``standstill`` (at rest on ``lane``, another lane) or ``no_stop`` (not
-    standing after the settings' max_time)."""
+    interval [``t0``, ``t1``] [s] after the verification time — [0, dt] is the intended step
+    itself), ``standstill`` (at rest on ``lane``, another lane) or ``no_stop`` (not standing
+    after the settings' max_time)."""
 
     failsafe: str
     reason: str
@@ -396,10 +396,12 @@ def _judge(ctx: Context, occ: Occupancy, sw: _Sweep, fs: FailSafe, checked: np.n
 def _verify(ctx: Context, x_start: np.ndarray, prefix: np.ndarray, traffic: TrafficState, t: float,
             s_hint: float | None, tm: dict[str, float], pred: _Prediction | None
             ) -> tuple[FailSafe | None, list[Refutation], _Prediction]:
-    """Try the fail-safes from ``x_start`` after the ``prefix`` states; the first that passes."""
+    """Try the fail-safes from ``x_start`` after the ``prefix`` states (from the verification time
+    on); the first that passes. Followers and cut-ins are judged where the ego is now."""
     w, st = ctx.world, ctx.settings
     s, e = _route_state(ctx, x_start, s_hint)
-    follower, protected = _excluded(ctx, traffic, s, e)
+    now = _route_state(ctx, prefix[0], s_hint) if len(prefix) else (s, e)
+    follower, protected = _excluded(ctx, traffic, *now)
     if pred is None or not np.array_equal(pred.include, ~follower):
         pred = _Prediction(~follower)
     plan = manoeuvres(st.failsafe, ctx.network.zones, s, max(float(x_start[3]), 0.0), ctx.brake_full)
