@@ -14,7 +14,8 @@ CPU time of the process (what the verification costs when other jobs share the c
 into intended step, fail-safe rollouts, prediction and checks (medians and p99, wall), the
 participants that could come near the ego's trajectories (median, max), how many steps verified,
 and the ratio of each median to N = 0's.
-Usage: ``python benchmarks/verify.py [--steps 200] [--quick]``.
+Usage: ``python benchmarks/verify.py [--steps 200] [--quick] [--coarse 3]`` (``--coarse 1``:
+uniform intervals of one control step over the whole horizon).
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ import numpy as np
 from twolevel.models import fourwheel as fw
 from twolevel.models.actuation import gamma_from_accel
 from twolevel.models.rollout import rollout
-from twolevel.safety.verify import context, verify_initial_state, verify_step
+from twolevel.safety.verify import VerifySettings, context, verify_initial_state, verify_step
 from twolevel.world import traffic as tr
 from twolevel.world.loader import load_scenario
 from twolevel.world.world import build_world
@@ -67,22 +68,24 @@ participants: [{', '.join(parts)}]
     return build_world(scn)
 
 
-def run(n: int, steps: int, seed: int, tmp: Path) -> dict[str, np.ndarray]:
+def run(n: int, steps: int, seed: int, tmp: Path, coarse: int = 3) -> dict[str, np.ndarray]:
     w = world_with(n, seed, tmp)
-    ctx = context(w)
+    ctx = context(w, settings=VerifySettings(coarse=coarse))
     dt = w.settings.dt
     x = fw.initial_state(w.ego.x, w.ego.y, w.ego.psi, w.ego.v, ctx.params)
     traffic = w.traffic0
     first = verify_initial_state(ctx, x, traffic, 0.0)
     fs, k_fs = first.failsafe, 0
     verify_step(ctx, x, np.array([0.0, 0.0]), traffic, 0.0)  # warm-up (compiled rollouts)
+    s_ego = 0.0
     rows: dict[str, list[float]] = {k: [] for k in ("total", "cpu", "step", "failsafe", "prediction", "check", "near",
                                                     "ok")}
     for k in range(steps):
         a = 1.0 if x[3] < 12.0 else 0.0
         u = np.array([0.0, float(gamma_from_accel(a, max(x[3], 0.0), ctx.params))])
+        s_ego = float(w.route.project_near(x[None, :2], np.array([s_ego]), 10.0)[0][0])  # as the simulator tracks it
         c0 = time.process_time()
-        v = verify_step(ctx, x, u, traffic, k * dt)
+        v = verify_step(ctx, x, u, traffic, k * dt, s_hint=s_ego)
         cpu = (time.process_time() - c0) * 1e3
         for key in ("total", "step", "failsafe", "prediction", "check"):
             rows[key].append(v.timings_ms.get(key, 0.0))
@@ -106,16 +109,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--steps", type=int, default=200)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--quick", action="store_true", help="50 steps per count")
+    ap.add_argument("--coarse", type=int, default=3, help="steps per interval beyond the first 2 s (1: uniform)")
     args = ap.parse_args(argv)
     steps = 50 if args.quick else args.steps
-    print(f"verify_step on the highway, {steps} steps per count; {platform.processor() or platform.machine()}, "
-          f"{os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}")
+    print(f"verify_step on the highway, {steps} steps per count, intervals of {args.coarse} steps beyond 2 s; "
+          f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}")
     print(f"{'N':>3} {'near med/max':>12} {'verified':>9} {'median':>7} {'p95':>7} {'p99':>7} {'cpu':>6} {'×N=0':>6} | "
           f"{'step':>5} {'fail-safe':>10} {'predict':>13} {'check':>11}  (median, p99 ms)")
     base = None
     with tempfile.TemporaryDirectory() as tmp:
         for n in COUNTS:
-            r = run(n, steps, args.seed, Path(tmp))
+            r = run(n, steps, args.seed, Path(tmp), args.coarse)
             q = np.percentile(r["total"], [50, 95, 99])
             base = base or q[0]
             split = " ".join(f"{np.median(r[k]):5.2f}/{np.percentile(r[k], 99):5.2f}" for k in ("step", "failsafe",
