@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from twolevel.control.low_level import LowLevelController, LowLevelSettings
-from twolevel.control.sensing import Memory
+from twolevel.world.sensing import Memory
 from twolevel.models import fourwheel as fw
 
 from mpc_worlds import highway_world

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from twolevel.control.low_level import LowLevelController, LowLevelSettings, prefix_bounded
-from twolevel.control.sensing import Memory
+from twolevel.world.sensing import Memory
 from twolevel.models import fourwheel as fw
 from twolevel.stl.parser import parse
 

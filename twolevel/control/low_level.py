@@ -5,7 +5,7 @@ Each step, given the MPC's optimal controls u* = [δ, a] over the horizon:
 1. forward-simulate the detailed four-wheel Pacejka model (:mod:`twolevel.models.rollout`,
    compiled, batched) from the ego's current detailed state under u* (a → γ through the
    actuation map at the speed the car has at each step);
-2. turn the predicted trajectory into the rules' signals (:mod:`twolevel.control.sensing`: the
+2. turn the predicted trajectory into the rules' signals (:mod:`twolevel.world.sensing`: the
    definitions of :mod:`twolevel.world.signals`, the other vehicles' constant-velocity
    predictions, ``collision_free`` as the oriented-box separation) and evaluate every rule with
    the batched offline monitor (:mod:`twolevel.control.batch_monitor`);
@@ -78,7 +78,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from twolevel.control.batch_monitor import evaluate_rules_batch
-from twolevel.control.sensing import Memory, Others, others_predicted, sense
+from twolevel.world.sensing import Memory, Others, others_predicted, sense
 from twolevel.models.actuation import accel_from_gamma, gamma_from_accel
 from twolevel.models.params import VehicleParams
 from twolevel.models.obb import box_corners
@@ -270,7 +270,7 @@ class LowLevelController:
         before this step, the ego's route position ``s0`` [m], the recorded ``history`` of every
         signal (oldest first, excluding now), the plan's states ``target`` (H+1, 4) [X, Y, ψ, v]
         and the step number (seeds the sampling); ``now``: the vehicles sensed now
-        (:func:`~twolevel.control.sensing.others_now` at x0, s0), when the caller has them."""
+        (:func:`~twolevel.world.sensing.others_now` at x0, s0), when the caller has them."""
         tm: dict[str, float] = {}
         t_start = time.perf_counter()
         p, st, H, dt = self.params, self.settings, self.H, self.dt

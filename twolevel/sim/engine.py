@@ -3,7 +3,7 @@
 :func:`simulate_scenario` is what ``twolevel simulate`` calls. Each step of ``dt``:
 
 1. **sense** the current sample (route position, limits, stop lines, lights, vehicles within
-   ``r_near``: :mod:`twolevel.control.sensing`);
+   ``r_near``: :mod:`twolevel.world.sensing`);
 2. **plan**: the high-level MPC (:mod:`twolevel.control.high_level`) from the ego's
    (X, Y, ψ, v), the traffic and stop-sign memory, and the recorded history of every signal;
 3. **check**: the low level (:mod:`twolevel.control.low_level`) forward-simulates the detailed
@@ -313,7 +313,7 @@ class _Loop:
 
     def _steps(self, progress: Callable[[StepInfo], None] | None, frames: Any) -> None:
         from twolevel.control.high_level import Snapshot
-        from twolevel.control.sensing import Memory, others_now, sense
+        from twolevel.world.sensing import Memory, others_now, sense
         from twolevel.models import fourwheel as fw
         from twolevel.models.actuation import gamma_from_accel
         from twolevel.models.rollout import rollout
@@ -424,7 +424,7 @@ class _Loop:
 
     def _collisions(self, t: float, X: float, Y: float, psi: float, traffic: Any) -> float:
         """Centre distance to the nearest vehicle [m]; opens/extends collision episodes."""
-        from twolevel.control.sensing import rect_separation
+        from twolevel.world.sensing import rect_separation
 
         w = self.world
         if traffic.x.size == 0 or not traffic.active.any():

@@ -10,9 +10,9 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from twolevel.control.sensing import Memory, others_predicted, rect_separation, sense
 from twolevel.models.obb import box_corners, box_separation
 from twolevel.world.loader import load_scenario
+from twolevel.world.sensing import Memory, others_predicted, rect_separation, sense
 from twolevel.world.signals import TrafficLog, signals_along
 from twolevel.world.traffic import TrafficState
 from twolevel.world.world import build_world
