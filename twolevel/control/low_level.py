@@ -8,7 +8,7 @@ Each step, given the MPC's optimal controls u* = [δ, a] over the horizon:
 2. turn the predicted trajectory into the rules' signals (:mod:`twolevel.world.sensing`: the
    definitions of :mod:`twolevel.world.signals`, the other vehicles' constant-velocity
    predictions, ``collision_free`` as the oriented-box separation) and evaluate every rule with
-   the batched offline monitor (:mod:`twolevel.control.batch_monitor`);
+   the batched offline monitor (:mod:`twolevel.monitor.batch`);
 3. if every rule holds, apply u*_0 (decision ``mpc``); otherwise sample candidates in the ball of
    radius r around u* (decision ``sampled``: the best-cost candidate that satisfies every rule);
    if none of the sampling budget does, brake fully (decision ``brake``) — unless the car is
@@ -77,12 +77,12 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from twolevel.control.batch_monitor import evaluate_rules_batch
 from twolevel.world.sensing import Memory, Others, others_predicted, sense
 from twolevel.models.actuation import accel_from_gamma, gamma_from_accel
 from twolevel.models.params import VehicleParams
 from twolevel.models.obb import box_corners
 from twolevel.models.rollout import Backend, Rollout, rollout, rollout_accel
+from twolevel.monitor.batch import evaluate_rules_batch
 from twolevel.stl import analysis, ast
 from twolevel.stl.typecheck import RuleSet
 from twolevel.world.traffic import TrafficState

@@ -37,6 +37,7 @@ __all__ = [
     "robustness",
     "evaluate_rules",
     "TraceEvaluator",
+    "Evaluator",
 ]
 
 Builtin = Callable[..., np.ndarray]
@@ -77,12 +78,13 @@ def _trace_length(signals: Mapping[str, np.ndarray], rules: Mapping[str, np.ndar
     return n
 
 
-class _Evaluator:
+class Evaluator:
     """One evaluation: signals, constants, rule results and a memo of evaluated nodes.
 
     Shape-generic: every value is an array of :attr:`shape` with time along the last axis, so
-    the batched monitor (:mod:`twolevel.control.batch_monitor`, shape (K, T)) reuses the whole
-    evaluation and only sets up its signals differently."""
+    the batched monitor (:class:`twolevel.monitor.batch.BatchEvaluator`, shape (K, T)) extends
+    it, setting up its signals differently (``__init__`` and :meth:`full`) and reusing the whole
+    evaluation (:meth:`run`, :meth:`apply`)."""
 
     def __init__(
         self,
@@ -235,7 +237,7 @@ def robustness(
     robustness; ``builtins`` replaces :data:`DEFAULT_BUILTINS`. Raises :class:`MonitorError` for
     a missing name, unequal lengths or a bad ``dt``.
     """
-    ev = _Evaluator(signals, dt, consts or {}, rules or {}, builtins)
+    ev = Evaluator(signals, dt, consts or {}, rules or {}, builtins)
     return np.asarray(ev.run(formula), dtype=np.float64).copy()
 
 
@@ -256,7 +258,7 @@ class TraceEvaluator:
         consts: Mapping[str, float] | None = None,
         builtins: Mapping[str, Builtin] | None = None,
     ) -> None:
-        self._ev = _Evaluator(signals, dt, consts or {}, {}, builtins)
+        self._ev = Evaluator(signals, dt, consts or {}, {}, builtins)
 
     def evaluate(self, formula: ast.Node) -> np.ndarray:
         """The robustness of ``formula`` at every sample (names may be rules already added)."""

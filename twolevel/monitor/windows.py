@@ -2,7 +2,7 @@
 
 Every function maps arrays to arrays with numpy and no per-sample Python loop, along the last
 axis (time): a (T,) trace for the offline monitor, or (K, T) candidates for the batched one
-(:mod:`twolevel.control.batch_monitor`), which costs one pass of numpy calls instead of K:
+(:mod:`twolevel.monitor.batch`), which costs one pass of numpy calls instead of K:
 
 * :func:`sliding` — the van Herk / Gil-Werman sliding min or max, O(n) whatever the width;
 * :func:`future_window` / :func:`past_window` — ``min``/``max`` over ``[i+a, i+b]`` (or

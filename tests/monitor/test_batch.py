@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tests.monitor import _formulas as F
-from twolevel.control.batch_monitor import robustness_batch
+from twolevel.monitor.batch import robustness_batch
 from twolevel.monitor.errors import MonitorError
 from twolevel.monitor.robustness import robustness
 from twolevel.stl import ast as A

@@ -15,13 +15,13 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from twolevel.monitor.errors import MonitorError
-from twolevel.monitor.robustness import DEFAULT_BUILTINS, Builtin, _Evaluator
+from twolevel.monitor.robustness import DEFAULT_BUILTINS, Builtin, Evaluator
 from twolevel.stl import ast
 
-__all__ = ["robustness_batch", "evaluate_rules_batch"]
+__all__ = ["BatchEvaluator", "robustness_batch", "evaluate_rules_batch"]
 
 
-class _Batch(_Evaluator):
+class BatchEvaluator(Evaluator):
     """The oracle's evaluation over (K, T) arrays: only the set-up of the signals differs."""
 
     def __init__(self, signals: Mapping[str, np.ndarray], dt: float, consts: Mapping[str, float],
@@ -60,7 +60,7 @@ def robustness_batch(
 ) -> np.ndarray:
     """Robustness (K, T) of ``formula`` on K traces: ``signals`` map names to (K, T) or shared
     (T,) arrays sampled every ``dt`` [s]. Equal, row by row, to the offline oracle."""
-    ev = _Batch(signals, dt, consts or {}, rules or {}, DEFAULT_BUILTINS if builtins is None else builtins, K)
+    ev = BatchEvaluator(signals, dt, consts or {}, rules or {}, DEFAULT_BUILTINS if builtins is None else builtins, K)
     return ev.run(formula)
 
 
