@@ -23,7 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from twolevel.control.high_level import HighLevelController, MPCSettings
+from twolevel.control.high_level.controller import HighLevelController
+from twolevel.control.high_level.settings import MPCSettings
 from twolevel.models import bicycle
 from twolevel.stl.lint import load_ruleset
 from twolevel.world.loader import load_scenario
@@ -91,12 +92,10 @@ def run(n: int, steps: int, seed: int, tmp: Path, exact: bool) -> dict:
     rec["nearby"] = []
     for k in range(steps):
         t = 0.1 * k
-        prev = ctl["modes"]._prev, ctl["modes"]._s_hint
-        rec_at = dict(ctl["modes"]._recover_at)
+        carry = ctl["modes"].carry  # every path solves the step the modes path sees
         out = {}
         for p, c in ctl.items():
-            c._prev, c._s_hint = prev
-            c._recover_at = dict(rec_at)
+            c.carry = carry
             c0 = time.process_time()
             r = c.solve(x, t, tr, None)
             R = rec[p]
@@ -108,17 +107,15 @@ def run(n: int, steps: int, seed: int, tmp: Path, exact: bool) -> dict:
             R["rows"].append(r.rows)
             R["qps"].append(r.qps)
             R["cost"].append(r.cost if r.ok else np.inf)
-            R["status"].append(r.status)
-        ctl["highs"]._prev, ctl["highs"]._s_hint = prev
+            R["status"].append(r.status.value)
         if exact:  # the same step, B&B to completion (same linearisation point as the modes path,
             # same recovery of rules violated now)
-            ref._prev, ref._s_hint, ref._recover_at = prev[0], prev[1], dict(rec_at)
+            ref.carry = carry
             step, _, _ = ref.prepare(x, t, tr, None)
             rec["nearby"].append(len(step.hc.index))
             res = ref.solve(x, t, tr, None)
             rec["exact"].append(res.cost if res.ok else np.inf)
         r = out["modes"]
-        ctl["modes"]._prev = (t, r.states, r.controls, r.mode) if r.ok or r.status == "fallback" else ctl["modes"]._prev
         x = bicycle.step(x, r.controls[0], 0.1, ctl["modes"].params)
         tr = advance(tr, 0.1)
     return rec

@@ -28,8 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-from twolevel.control.high_level import HighLevelController, MPCSettings
-from twolevel.control.nmpc import NmpcController, NmpcOptions
+from twolevel.control.high_level.controller import HighLevelController
+from twolevel.control.high_level.settings import MPCSettings
+from twolevel.control.nmpc.controller import NmpcController, NmpcOptions
 from twolevel.models import bicycle
 from twolevel.models import fourwheel as fw
 from twolevel.models.rollout import rollout_accel

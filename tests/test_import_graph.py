@@ -11,18 +11,9 @@ the two modules depend on each other, so it counts like any other.
 from __future__ import annotations
 
 import ast
-import warnings
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1] / "twolevel"
-
-#: Cycles that are known and owned by the restructuring of ``twolevel/control/`` (the high-level
-#: controller's packages): each entry is the set of modules of one cycle, all in control/. The
-#: control restructuring removes them and empties this list; nothing may be added to it.
-ALLOWED_CONTROL_CYCLES: list[frozenset[str]] = [
-    # solve_step needs the controller's PlanResult and fallback; the controller calls solve_step
-    frozenset({"twolevel.control.high_level", "twolevel.control.solve"}),
-]
 
 
 def modules() -> dict[str, Path]:
@@ -179,16 +170,7 @@ def test_no_import_cycles() -> None:
     g = graph()
     found = cycles(g)
     report = "\n".join(" → ".join(path_through(g, c)) + f"   (component: {', '.join(c)})" for c in found)
-    allowed = [c for c in found if all(m.startswith("twolevel.control.") for m in c)
-               and any(set(c) <= a for a in ALLOWED_CONTROL_CYCLES)]
-    stale = [a for a in ALLOWED_CONTROL_CYCLES if not any(set(c) <= a for c in found)]
-    if stale:
-        warnings.warn(f"allowed control cycles that no longer exist (remove them): {stale}", stacklevel=1)
-    if allowed:
-        warnings.warn("import cycles left in twolevel/control/ (allowed for now):\n"
-                      + "\n".join(" → ".join(path_through(g, c)) for c in allowed), stacklevel=1)
-    bad = [c for c in found if c not in allowed]
-    assert not bad, "import cycles between twolevel's modules:\n" + report
+    assert not found, "import cycles between twolevel's modules:\n" + report
 
 
 def test_the_solver_neutral_layer_does_not_import_the_compiler() -> None:

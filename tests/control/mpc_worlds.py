@@ -8,7 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from twolevel.control.high_level import HighLevelController, MPCSettings
+from twolevel.control.high_level.controller import HighLevelController
+from twolevel.control.high_level.settings import MPCSettings
 from twolevel.models import bicycle
 from twolevel.stl.lint import load_ruleset
 from twolevel.world.loader import load_scenario

@@ -178,7 +178,7 @@ def test_plans_keep_within_the_lateral_acceleration_limit(tmp_path) -> None:
 
 
 def test_steering_bound_follows_the_speed_and_the_road() -> None:
-    from twolevel.control.horizon import steering_bound
+    from twolevel.control.high_level.linearisation import steering_bound
     from twolevel.models.params import BicycleParams
 
     p = BicycleParams()

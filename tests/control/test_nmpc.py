@@ -12,9 +12,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from twolevel.control.high_level import Snapshot
-from twolevel.control.nmpc import MIL530, NmpcController, NmpcOptions
-from twolevel.control.nmpc_nlp import bicycle_step_casadi
+from twolevel.control.codes import MIL530
+from twolevel.control.nmpc.controller import NmpcController, NmpcOptions
+from twolevel.control.nmpc.nlp import bicycle_step_casadi
+from twolevel.control.planner import Snapshot
 from twolevel.models import bicycle
 from twolevel.models import fourwheel as fw
 from twolevel.models.params import VehicleParams

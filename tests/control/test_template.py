@@ -1,4 +1,4 @@
-"""Value-only refresh of a step model (twolevel.control.template): on a shape hit the refreshed
+"""Value-only refresh of a step model (twolevel.control.high_level.template): on a shape hit the refreshed
 model equals a model built afresh with the same structure, and the controller's plans do not
 depend on whether the refresh is used."""
 
@@ -7,8 +7,9 @@ from __future__ import annotations
 import numpy as np
 
 from mpc_worlds import advance, make_world, rules
-from twolevel.control.high_level import HighLevelController, MPCSettings
-from twolevel.control.problem import assemble
+from twolevel.control.high_level.controller import HighLevelController
+from twolevel.control.high_level.settings import MPCSettings
+from twolevel.control.high_level.problem import assemble
 from twolevel.models import bicycle
 
 EGO = "{start: {lane: middle, s: 20}, speed: 12.0, desired_speed: 13.0}"
@@ -29,10 +30,7 @@ on_road = always[0:1] ((e <= 4.5) and (e >= -4.5));
 
 
 def _fresh(ctrl: HighLevelController, step, past, P, keep):
-    st = ctrl.settings
-    names = set().union(*(r.reads for r in ctrl.rules))
-    return assemble(step, ctrl.requirements(frozenset(), P), H=st.H, dt=st.dt, params=ctrl.params,
-                    weights=st.weights, past=past, P=P, names=names, eps=st.eps, stable=True, keep=keep)
+    return assemble(step, ctrl.step_rules(past, P), ctrl.settings, ctrl.params, stable=True, keep=keep)
 
 
 def test_refreshed_model_equals_a_fresh_build(tmp_path) -> None:
@@ -48,7 +46,7 @@ def test_refreshed_model_equals_a_fresh_build(tmp_path) -> None:
         asm = ctrl.build(step, past, P)
         if ctrl.templates.hits > h0:
             hits += 1
-            ref = _fresh(ctrl, step, past, P, asm.template.codes).model
+            ref = _fresh(ctrl, step, past, P, ctrl.templates.holding(asm).codes).model
             m = asm.model
             assert m.A.shape == ref.A.shape and m.A.nnz == ref.A.nnz
             assert np.array_equal(m.A.indptr, ref.A.indptr) and np.array_equal(m.A.indices, ref.A.indices)
@@ -76,9 +74,9 @@ def test_plans_do_not_depend_on_the_refresh(tmp_path) -> None:
     tr = w.traffic0
     for k in range(12):
         res = {}
-        prev = ctl[True]._prev, ctl[True]._s_hint
+        carry = ctl[True].carry
         for f, c in ctl.items():
-            c._prev, c._s_hint = prev
+            c.carry = carry
             res[f] = c.solve(x, 0.1 * k, tr, None)
         assert res[True].ok and res[False].ok
         # B&B to completion on both: the same optimum (the refreshed model only keeps redundant rows)

@@ -35,7 +35,8 @@ def test_physically_invalid_override_is_out_of_range(tmp_path: Path) -> None:
 
 
 def test_lateral_acceleration_limit_is_a_bicycle_parameter(tmp_path: Path) -> None:
-    from twolevel.control.high_level import HighLevelController, MPCSettings
+    from twolevel.control.high_level.controller import HighLevelController
+    from twolevel.control.high_level.settings import MPCSettings
     from twolevel.world.world import build_world
 
     path = _scenario(tmp_path, "    a_lat_max: 6.5\n")

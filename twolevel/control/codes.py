@@ -1,4 +1,4 @@
-"""Diagnostic codes of the high-level controller and ``twolevel plan`` (``MIL51x``–``MIL52x``).
+"""Diagnostic codes of the planners and ``twolevel plan`` (``MIL51x``–``MIL53x``).
 
 ``MIL501``–``MIL504`` (encoding) live in :mod:`twolevel.compiler.codes`. Declared once here; each
 :class:`~twolevel.diagnostics.Code` registers itself. No heavy imports.
@@ -10,7 +10,7 @@ from twolevel.diagnostics import Code, Severity
 
 E, W, I = Severity.ERROR, Severity.WARNING, Severity.INFO
 
-__all__ = ["MIL510", "MIL511", "MIL512", "MIL513", "MIL514", "MIL515", "MIL516", "MIL517"]
+__all__ = ["MIL510", "MIL511", "MIL512", "MIL513", "MIL514", "MIL515", "MIL516", "MIL517", "MIL530"]
 
 MIL510 = Code("MIL510", "signal-not-predictable", W,
               "A rule reads a signal the MPC cannot predict over its horizon; the rule is left to the low level.")
@@ -24,3 +24,5 @@ MIL516 = Code("MIL516", "bad-trace", E, "The trace file cannot give the ego stat
 MIL517 = Code("MIL517", "rule-recovering", W,
               "A rule is already violated now by signals known at solve time (e.g. a vehicle cut in closer "
               "than the gap); the MPC requires it from the first step the plan can still change, to recover.")
+MIL530 = Code("MIL530", "nmpc-rule-not-smooth", W,
+              "A rule cannot be written as a smooth constraint of the NMPC baseline; the NMPC ignores it.")

@@ -137,7 +137,8 @@ def plan_scenario(
     emit: str | None = None, time_limit: float | None = 10.0,
 ) -> tuple[PlanReport | None, list[Diagnostic]]:
     """Solve one MPC step of a scenario (see the module docstring). ``time_limit`` [s] per solve."""
-    from twolevel.control.high_level import SOLVERS, HighLevelController, MPCSettings
+    from twolevel.control.high_level.controller import HighLevelController
+    from twolevel.control.high_level.settings import SOLVERS, MPCSettings
     from twolevel.world.loader import load_scenario
     from twolevel.world.world import build_world
 
@@ -189,7 +190,7 @@ def plan_scenario(
     conflicts: tuple[str, ...] = ()
     unencodable = any(d.is_error and d.code.startswith("MIL50") for d in (*diags, *res.diagnostics))
     timed_out = any(d.code == "MIL515" and "time limit" in d.message for d in res.diagnostics)
-    if res.status not in ("optimal", "feasible") and not unencodable and not timed_out:
+    if not res.ok and not unencodable and not timed_out:
         # rules conflict only when the problem is infeasible, not when it timed out or a rule
         # could not be encoded (those say so themselves)
         step, past_s, P = ctrl.prepare(ego, t0, traffic, history)
@@ -213,7 +214,7 @@ def plan_scenario(
     H, dt = ctrl.settings.H, ctrl.settings.dt
     controls = np.vstack([res.controls, res.controls[-1:]])
     plan = tuple((t0 + k * dt, *map(float, res.states[k]), *map(float, controls[k])) for k in range(H + 1))
-    report = PlanReport(res.status, res.cost, dict(res.timings_ms), res.binaries, res.rows, res.columns, plan,
+    report = PlanReport(res.status.value, res.cost, dict(res.timings_ms), res.binaries, res.rows, res.columns, plan,
                         tuple(res.rule_robustness.items()), solver, res.qps, res.certified, conflicts, res.message,
                         emitted)
     return report, diags + [d for d in res.diagnostics if d not in diags]

@@ -172,7 +172,7 @@ class _Loop:
 
     @classmethod
     def create(cls, world: Any, scn: Any, *, monitor: bool, controller: str) -> tuple["_Loop | None", list[Diagnostic]]:
-        from twolevel.control.high_level import HighLevelController
+        from twolevel.control.high_level.controller import HighLevelController
         from twolevel.control.low_level import LowLevelController
         from twolevel.world.world import load_rulesets
 
@@ -180,7 +180,7 @@ class _Loop:
         if any(d.is_error for d in diags):
             return None, diags
         if controller.startswith("nmpc"):
-            from twolevel.control.nmpc import NmpcController
+            from twolevel.control.nmpc.controller import NmpcController
 
             model = "fourwheel" if controller == "nmpc-fourwheel" else "kinematic"
             hl, d = NmpcController.from_world(world, model=model)
@@ -312,7 +312,7 @@ class _Loop:
         )
 
     def _steps(self, progress: Callable[[StepInfo], None] | None, frames: Any) -> None:
-        from twolevel.control.high_level import Snapshot
+        from twolevel.control.planner import EgoState, PlanStatus, Snapshot
         from twolevel.world.sensing import Memory, others_now, sense
         from twolevel.models import fourwheel as fw
         from twolevel.models.actuation import gamma_from_accel
@@ -353,7 +353,7 @@ class _Loop:
             mem_after = memory.after(w, t, s0, v)
             past = history.view()
             c1 = time.perf_counter()
-            ego = x if self.controller == "nmpc-fourwheel" else (X, Y, psi, v)  # the 4-wheel NMPC wants the full state
+            ego = EgoState(np.array([X, Y, psi, v]), x)
             plan = self.hl.solve(ego, t, Snapshot(traffic, mem_after.stops), past)
             c2 = time.perf_counter()
             u_star = np.asarray(plan.controls, dtype=float)
@@ -368,7 +368,7 @@ class _Loop:
                 why = ""
                 control = np.array([u_star[0, 0], float(gamma_from_accel(u_star[0, 1], max(x[3], 0.0), p))])
                 accel, decision, tried = float(u_star[0, 1]), "nmpc" if self.controller.startswith("nmpc") else "mpc", 0
-            if decision == "mpc" and plan.status == "fallback":
+            if decision == "mpc" and plan.status is PlanStatus.FALLBACK:
                 decision = "fallback"
             c3 = time.perf_counter()
             t_high, t_low = (c2 - c1) * 1e3, (c3 - c2) * 1e3
@@ -382,7 +382,7 @@ class _Loop:
                    "gamma": float(control[1]), "decision": decision, "t_high_ms": t_high, "t_low_ms": t_low,
                    "t_step_ms": t_step, "n_near": now["n_near"], "min_dist": min_dist, "min_gap": now["min_gap"],
                    "tracking_error": abs(now["e"]), "v_max": now["v_max"], "light_state": light,
-                   "candidates": tried, "ll_violated": why, "hl_status": plan.status, "hl_qps": plan.qps}
+                   "candidates": tried, "ll_violated": why, "hl_status": plan.status.value, "hl_qps": plan.qps}
             row.update({c: now[c] for c in SIGNAL_COLUMNS})
             st = self.stats
             st["step"].append(t_step); st["high"].append(t_high); st["low"].append(t_low)

@@ -1,7 +1,7 @@
-"""Value-only refresh of an MPC step model whose structure repeats (design.md, "What makes either
-path fast": build the pattern once per shape and update values in place).
+"""Value-only refresh of an MPC step model whose structure repeats: build the pattern once per
+shape and update values in place.
 
-A step model built in the encoder's *stable* mode (:func:`twolevel.control.problem.assemble`
+A step model built in the encoder's *stable* mode (:func:`twolevel.control.high_level.problem.assemble`
 with ``stable=True``) has a structure that depends only on the rule set after folding, on which
 signals are affine, and on the kept vehicle–step pairs: every vectorised block keeps its
 redundant rows, every kept pair is a disjunction of its four faces (impossible faces are
@@ -23,20 +23,22 @@ from __future__ import annotations
 
 from collections import OrderedDict
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence
+from typing import Mapping
 
 import numpy as np
 
-from twolevel.control.horizon import StepData
-from twolevel.control.problem import (Assembled, Weights, dynamics_values, guard_values, input_bounds, others_of,
-                                      set_cost, trace_signals)
 from twolevel.compiler.affine_block import AffineBlock
 from twolevel.compiler.block import Block
 from twolevel.compiler.collision import CollisionBlock, collision_free_builtin
 from twolevel.compiler.evaluator import Evaluator
 from twolevel.compiler.signals import AffineSignal, TraceSignals
 from twolevel.compiler.tree import Box, IntervalBounds, Op
-from twolevel.compiler.types import Emission, Requirement
+from twolevel.compiler.types import Emission
+from twolevel.control.high_level.backend import Backend
+from twolevel.control.high_level.linearisation import StepData
+from twolevel.control.high_level.problem import (Assembled, StepRules, dynamics_values, guard_values, input_bounds,
+                                                 others_of, set_cost, trace_signals)
+from twolevel.control.high_level.settings import MPCSettings
 from twolevel.models.params import BicycleParams
 
 __all__ = ["StepTemplate", "TemplateCache", "template_of", "refresh", "signal_kinds"]
@@ -54,7 +56,7 @@ class StepTemplate:
     kinds: tuple[tuple[str, ...], ...]  # per requirement: the kinds of its emitted blocks
     tri0: int
     row0: int
-    backend: object = None
+    backend: Backend | None = None
     hits: int = 0
     codes: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
@@ -104,16 +106,17 @@ def template_of(asm: Assembled, eps: float) -> StepTemplate | None:
                         codes=np.concatenate(codes) if codes else np.zeros(0, np.int64))
 
 
-def refresh(tpl: StepTemplate, step: StepData, requirements: Sequence[Requirement], past: Mapping[str, np.ndarray],
-            *, names: set[str], dt: float, eps: float, weights: Weights, params: BicycleParams,
-            pad: float) -> Assembled | None:
+def refresh(tpl: StepTemplate, step: StepData, rules: StepRules, settings: MPCSettings,
+            params: BicycleParams) -> Assembled | None:
     """Write this step's values into ``tpl``'s model in place; None (model untouched) when the
     structure differs. See the module docstring."""
+    requirements, past = rules.requirements, rules.past
+    dt, eps = settings.dt, settings.eps
     asm = tpl.asm
     m, lay = asm.model, asm.layout
     H = lay.x.shape[0]
     n_sig = 6 * H
-    sigs = trace_signals(step, lay, n_sig, past, names | {"x", "y"})
+    sigs = trace_signals(step, lay, n_sig, past, rules.names | {"x", "y"})
     if signal_kinds(sigs) != signal_kinds(asm.signals):
         return None
     lb, ub = m.lb.copy(), m.ub.copy()
@@ -122,7 +125,8 @@ def refresh(tpl: StepTemplate, step: StepData, requirements: Sequence[Requiremen
     u_lo, u_hi = input_bounds(step, params)
     lb[lay.u.ravel()], ub[lay.u.ravel()] = u_lo.ravel(), u_hi.ravel()
     P = lay.P
-    cf = collision_free_builtin("x", "y", others_of(step, P), ids=np.asarray(step.hc.index, np.int64), pad=pad)
+    cf = collision_free_builtin("x", "y", others_of(step, P), ids=np.asarray(step.hc.index, np.int64),
+                                pad=settings.pad)
     ev = Evaluator(TraceSignals(sigs, P + 1 + H), dt, IntervalBounds(Box(lb, ub)), builtins={"collision_free": cf},
                    stable=True)
     writes: list[tuple[Emission, np.ndarray, np.ndarray, np.ndarray | None]] = []
@@ -167,7 +171,7 @@ def refresh(tpl: StepTemplate, step: StepData, requirements: Sequence[Requiremen
     if pat.duplicates:
         m.A.data[:] = pat.scatter(tv)
     m.lb[:], m.ub[:] = lb, ub
-    set_cost(m, step, lay, weights)
+    set_cost(m, step, lay, settings.weights)
     asm.signals = sigs
     tpl.hits += 1
     return asm
@@ -192,3 +196,10 @@ class TemplateCache:
 
     def touch(self, key: tuple, tpl: StepTemplate) -> None:
         self._store.move_to_end((key, id(tpl)))
+
+    def holding(self, asm: Assembled) -> StepTemplate | None:
+        """The template whose model ``asm`` is, if any."""
+        for tpl in self._store.values():
+            if tpl.asm is asm:
+                return tpl
+        return None

@@ -24,7 +24,7 @@ and able to stop before it: c = 1/(2·deceleration); n = 0, b = 1, c = 0 when no
 ((ξ/A)⁴ + (η/B)⁴ + ε)^¼ ≥ 1 in the obstacle's frame (ξ along its heading), which contains the
 Minkowski sum of the two boxes grown by the distance d, scales like a distance, and is smooth.
 
-Cost (the paper's, as :mod:`twolevel.control.problem`): Σ_k w_u‖u_k‖² + w_du‖u_k − u_{k−1}‖²
+Cost (the paper's, as :mod:`twolevel.control.high_level.problem`): Σ_k w_u‖u_k‖² + w_du‖u_k − u_{k−1}‖²
 + Σ_{k=1..H} Σ_i w_i (ζ_{k,i} − ω_{k,i})².
 """
 
@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from twolevel.control.problem import Weights
+from twolevel.control.high_level.settings import Weights
 from twolevel.models import fourwheel as fw
 from twolevel.models.actuation import gamma_from_accel
 from twolevel.models.ops import casadi_ops

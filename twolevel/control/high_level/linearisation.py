@@ -1,30 +1,33 @@
-"""What one MPC step knows before it builds a model: the linearisation, the waypoints, the bounds.
+"""What one MPC step knows before it builds a model: the linearisation point and the bounds.
 
 :func:`prepare_step` turns (ego state, time, traffic, history, previous plan) into a
-:class:`StepData`: the linearisation point (the previous plan shifted by one step, or a rollout
-of the reference when there is none), the Jacobians of the kinematic bicycle along it
-(:func:`twolevel.models.bicycle.linearize`, vectorised), the desired waypoints ω_k (positions
-and headings from the route, speed from the route's desired-speed profile, which already obeys
-the limits in force), the solve-time constants of :func:`twolevel.world.signals.horizon_constants`
-and the state bounds (reachable boxes). Units: m, rad, m/s, s.
+:class:`StepData`: the reference (:mod:`twolevel.control.high_level.reference`: waypoints ω_k
+and the solve-time constants), the linearisation point (the previous plan shifted by one step,
+a rollout of the reference's controls, or full braking), the Jacobians of the kinematic bicycle
+along it (:func:`twolevel.models.bicycle.linearize`, vectorised), the state and steering bounds
+(reachable boxes) and the guards (:mod:`twolevel.control.high_level.guards`: the drivable band,
+the terminal can-still-stop condition). Units: m, rad, m/s, s.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Mapping
 
 import numpy as np
 
-from twolevel.control.guards import TerminalStop, drivable_band, stop_lines, terminal_stop
+from twolevel.control.high_level.guards import TerminalStop, drivable_band, stop_lines, terminal_stop
+from twolevel.control.high_level.reference import reference, reference_controls, wrap_to
+from twolevel.control.high_level.settings import MPCSettings
+from twolevel.control.planner import PreviousPlan
 from twolevel.models import bicycle
 from twolevel.models.params import BicycleParams
-from twolevel.world.signals import HorizonConstants, StopMemory, horizon_constants
+from twolevel.world.signals import HorizonConstants, StopMemory
 from twolevel.world.traffic import TrafficState
 from twolevel.world.world import World
 
-__all__ = ["StepData", "prepare_step", "direction_box", "steering_bound", "wrap_to", "history_length"]
+__all__ = ["StepData", "prepare_step", "direction_box", "steering_bound", "history_length"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -37,9 +40,9 @@ class StepData:
     position, tangent heading and route point of the linearisation point's projection (k = 0..H),
     for s_k ≈ s̄_k + t̄_kᵀ(p_k − p̄_k); ``lo``/``hi`` (H, 4): state bounds for k = 1..H;
     ``e_lo``/``e_hi`` (H,) [m]: bounds on the lateral offset e_k ≈ n̄_kᵀ(p_k − p̄_k) for k = 1..H
-    (:func:`twolevel.control.guards.drivable_band`, widened to include where the ego and the
+    (:func:`twolevel.control.high_level.guards.drivable_band`, widened to include where the ego and the
     linearisation point already are); ``term``: the can-still-stop terminal condition
-    (:func:`twolevel.control.guards.terminal_stop`, inactive when no line applies); ``delta_hi``
+    (:func:`twolevel.control.high_level.guards.terminal_stop`, inactive when no line applies); ``delta_hi``
     (H,) [rad]: the steering bound per step (:func:`steering_bound`; None: the steering limit)."""
 
     t: float
@@ -63,11 +66,6 @@ class StepData:
     e_hi: np.ndarray
     term: TerminalStop = TerminalStop()
     delta_hi: np.ndarray | None = None
-
-
-def wrap_to(angle: np.ndarray | float, ref: float) -> np.ndarray:
-    """``angle`` shifted by a multiple of 2π to lie within π of ``ref`` [rad]."""
-    return ref + np.mod(np.asarray(angle, float) - ref + math.pi, 2 * math.pi) - math.pi
 
 
 def _cos_range(lo: np.ndarray, hi: np.ndarray, phase: float) -> tuple[np.ndarray, np.ndarray]:
@@ -119,83 +117,28 @@ def steering_bound(v: np.ndarray, kappa: np.ndarray, params: BicycleParams) -> n
     return np.minimum(params.delta_max, np.maximum(lat, need))
 
 
-def _reference_controls(route_kappa: np.ndarray, v_ref: np.ndarray, dt: float, params: BicycleParams
-                        ) -> np.ndarray:
-    delta = np.clip(np.arctan(params.l_f * route_kappa), -params.delta_max, params.delta_max)
-    acc = np.clip(np.diff(v_ref) / dt, params.a_min, params.a_max)
-    return np.stack([delta, acc], axis=1)
-
-
-def _braking(v0: float, H: int, dt: float, params: BicycleParams) -> tuple[float, float]:
-    """Distance [m] and speed [m/s] after H steps of full braking from ``v0`` (no reversing)."""
-    v = v0 + params.a_min * dt * np.arange(1, H + 1)
-    t_stop = v0 / -params.a_min
-    T = min(H * dt, t_stop)
-    return v0 * T + 0.5 * params.a_min * T * T, max(float(v[-1]), 0.0)
-
-
-def _reference_to(route: object, s0: float, v0: float, H: int, dt: float, s_end: float, decel: float,
-                  a_max: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
-    """Like :meth:`~twolevel.world.geometry.Route.reference`, but ending with a stop at
-    ``s_end`` [m]: the target speed is at most sqrt(2·``decel``·(s_end − s)), the reference brakes
-    as hard as reaching it needs, and positions never pass ``s_end``."""
-    s = np.empty(H + 1)
-    v = np.empty(H + 1)
-    s[0], v[0] = s0, v0
-    for k in range(H):  # H ≈ 10 scalar steps
-        d = max(s_end - s[k], 0.0)
-        target = min(float(route.desired_speed_at(s[k])), math.sqrt(2.0 * decel * d))  # type: ignore[attr-defined]
-        need = v[k] * v[k] / (2.0 * max(d, 1e-3))
-        v[k + 1] = min(max(target, v[k] - max(a_max, need) * dt, 0.0), v[k] + a_max * dt)
-        s[k + 1] = min(s[k] + 0.5 * (v[k] + v[k + 1]) * dt, max(s_end, s[k]))
-        if s[k + 1] >= s_end - 1e-9:
-            v[k + 1] = 0.0
-    return s, v
-
-
 def prepare_step(
-    world: World, x0: np.ndarray, t: float, traffic: TrafficState, *, H: int, dt: float,
-    params: BicycleParams, prev: tuple[np.ndarray, np.ndarray] | None = None,
-    u_prev: np.ndarray | None = None, memory: StopMemory | None = None, s_hint: float | None = None,
-    about: str = "plan", stop_rules: tuple[bool, bool] = (False, False), stop_decel: float = 3.0,
-    stop_margin: float = 0.3, band: bool = True,
+    world: World, x0: np.ndarray, t: float, traffic: TrafficState, settings: MPCSettings, params: BicycleParams,
+    *, prev: PreviousPlan | None = None, u_prev: np.ndarray | None = None, memory: StopMemory | None = None,
+    s_hint: float | None = None, about: str = "plan", stop_rules: tuple[bool, bool] = (False, False),
 ) -> StepData:
-    """Everything known at time ``t`` [s] for ego state ``x0`` = (X, Y, ψ, v).
+    """Everything known at time ``t`` [s] for ego state ``x0`` = (X, Y, ψ, v), over the horizon
+    and period of ``settings``.
 
-    ``prev`` = (states (H+1, 4), controls (H, 2)) of the previous plan, made one step ago; it is
-    shifted by one step to give the linearisation point (``about="plan"``); ``about="reference"``
-    linearises about a rollout of the reference's controls, ``"brake"`` about full braking. ``u_prev`` [δ, a] is the control applied
-    during the last step (for the ‖u_0 − u_{−1}‖² term; default the previous plan's first).
-    ``stop_rules`` = (a rule reads d_stop, a rule reads light_red/d_light): which lines the
-    terminal can-still-stop condition guards, with deceleration ``stop_decel`` [m/s²] and
-    ``stop_margin`` [m] before the line; ``band``: bound the lateral offset to the drivable band."""
+    ``prev``: the previous plan, made one step ago; it is shifted by one step to give the
+    linearisation point (``about="plan"``); ``about="reference"`` linearises about a rollout of
+    the reference's controls, ``"brake"`` about full braking. ``u_prev`` [δ, a] is the control
+    applied during the last step (for the ‖u_0 − u_{−1}‖² term; default the previous plan's
+    first). ``stop_rules`` = (a rule reads d_stop, a rule reads light_red/d_light): which lines
+    the terminal can-still-stop condition guards, with ``settings.stop_decel`` [m/s²] and
+    ``settings.stop_margin`` [m] before the line; ``settings.band``: bound the lateral offset to
+    the drivable band. ``memory``, ``s_hint``: see :func:`~twolevel.control.high_level.reference.reference`."""
+    H, dt = settings.H, settings.dt
+    stop_decel, stop_margin = settings.stop_decel, settings.stop_margin
     route = world.route
     x0 = np.asarray(x0, dtype=float)[:4].copy()
-    if s_hint is not None and math.isfinite(s_hint):
-        s_arr, e_arr = route.project_near(x0[None, :2], np.array([s_hint]), 15.0)
-    else:
-        s_arr, e_arr = route.local_coordinates(x0[None, :2])
-    s0 = float(s_arr[0])
-    s_ref, v_ref = route.reference(s0, max(float(x0[3]), 0.0), H, dt)
-    hc = horizon_constants(world, traffic, t, x0, H=H, dt=dt, s_pred=s_ref, memory=memory,
-                           station=(s0, float(e_arr[0])))
-    # the reference ends with a stop where the plan must stop: the goal (when the route stops
-    # there) and a stop line / red light a rule guards that full braking can still stop before
-    d_brake, v_brake = _braking(float(x0[3]), H, dt, params)
-    s_end = float(route.s[-1]) if route.v_des.size and route.v_des[-1] <= 1e-9 else math.inf
-    if any(stop_rules):
-        lines = stop_lines(hc, stop=stop_rules[0], light=stop_rules[1])
-        s_near = float(min(lines[0], lines[-1]))
-        if s0 + d_brake <= s_near + 1e-6:
-            s_end = min(s_end, max(s_near - stop_margin, s0))
-    if math.isfinite(s_end):
-        s_ref, v_ref = _reference_to(route, s0, max(float(x0[3]), 0.0), H, dt, s_end, stop_decel)
-        hc = replace(hc, s_ref=s_ref, v_max=route.limit_at(s_ref).astype(float))
-    v_ref = np.minimum(v_ref, route.limit_at(s_ref))
-    pts = route.position(s_ref)
-    head = wrap_to(route.heading_at(s_ref), float(x0[2]))
-    head = x0[2] + np.concatenate([[0.0], np.cumsum(wrap_to(np.diff(head), 0.0))])
-    omega = np.column_stack([pts[1:], head[1:], v_ref[1:]])
+    ref = reference(world, x0, t, traffic, settings, params, memory=memory, s_hint=s_hint, stop_rules=stop_rules)
+    s0, s_ref, v_ref, omega, hc = ref.s0, ref.s_ref, ref.v_ref, ref.omega, ref.hc
     if about == "brake":  # a braking rollout with the wheel straight (to standstill, no reversing)
         us_bar = np.zeros((H, 2))
         v = float(x0[3])
@@ -204,16 +147,16 @@ def prepare_step(
             v = max(v + us_bar[k, 1] * dt, 0.0)
         xs_bar = bicycle.rollout(x0, us_bar, dt, params)
         if u_prev is None and prev is not None:
-            u_prev = prev[1][0]
+            u_prev = prev.controls[0]
     elif prev is not None and about == "plan":
-        ps, pu = prev
+        ps, pu = prev.states, prev.controls
         us_bar = np.vstack([pu[1:], pu[-1:]])
         xs_bar = np.vstack([x0[None], ps[2:], bicycle.step(ps[-1], pu[-1], dt, params)[None]])
         xs_bar[:, 2] = wrap_to(xs_bar[:, 2], float(x0[2]))
         if u_prev is None:
             u_prev = pu[0]
     else:
-        us_bar = _reference_controls(route.curvature_at(s_ref[:-1]), v_ref, dt, params)
+        us_bar = reference_controls(route.curvature_at(s_ref[:-1]), v_ref, dt, params)
         xs_bar = bicycle.rollout(x0, us_bar, dt, params)
     if u_prev is None:
         u_prev = np.zeros(2)
@@ -228,7 +171,7 @@ def prepare_step(
     # lateral offsets: the drivable band (never narrower than where the ego / the linearisation are)
     n_bar = np.stack([-np.sin(h_bar), np.cos(h_bar)], axis=1)
     e_bar = np.einsum("kj,kj->k", n_bar, xs_bar[:, :2] - p_bar)
-    if band:  # never narrower than where the ego already is (so the step stays feasible)
+    if settings.band:  # never narrower than where the ego already is (so the step stays feasible)
         b_lo, b_hi = drivable_band(world, s_bar[1:])
         e_lo = np.minimum(b_lo, e_bar[0] - 0.05)
         e_hi = np.maximum(b_hi, e_bar[0] + 0.05)
@@ -242,7 +185,7 @@ def prepare_step(
         s_line = min(s_line, float(route.s[-1]) + stop_margin)
     if math.isfinite(s_line):
         reach = min(max(s_line - stop_margin - s0, 0.5), world.settings.r_near)
-        term = terminal_stop(s_line, s0 + d_brake, v_brake, decel=stop_decel, reach=reach, margin=stop_margin)
+        term = terminal_stop(s_line, s0 + ref.d_brake, ref.v_brake, decel=stop_decel, reach=reach, margin=stop_margin)
     return StepData(t, x0, np.asarray(u_prev, float), xs_bar, us_bar, A, B, c, omega, s_ref, s_bar, h_bar, p_bar,
                     lo, hi, hc, width, e_lo, e_hi, term, steering_bound(np.maximum(xs_bar[:-1, 3], x0[3]),
                                                                         route.curvature_at(s_ref[:-1]),

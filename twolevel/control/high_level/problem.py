@@ -3,7 +3,7 @@
 Columns: ``x`` — the states X, Y, ψ, v for k = 1..H (row-major, 4 per step); ``u`` — the inputs
 δ, a for k = 0..H−1; then the encoder's variables (binaries of disjunctions, auxiliaries).
 Rows: ``dyn`` — x_{k+1} − A_k x_k − B_k u_k = c_k (A_0 x_0 moved to the right-hand side);
-``guard`` (:mod:`twolevel.control.guards`) — the lateral offset e_k ≈ n̄_kᵀ(p_k − p̄_k) within the
+``guard`` (:mod:`twolevel.control.high_level.guards`) — the lateral offset e_k ≈ n̄_kᵀ(p_k − p̄_k) within the
 drivable band for k = 1..H, and the terminal can-still-stop row
 v_H ≤ κ·(s_line − margin − s_0 − Σ_k dt·(v_k + v_{k+1})/2) + offset on the distance travelled
 (which no sideways motion shortens, and which bounds the route progress from above; ``0·x ≤ 1``
@@ -18,13 +18,13 @@ d_stop,k = s_stop − s_k, d_light,k = s_light − s_k and d_lead,k = s_lead,k �
 
 Every model of the same *shape* (same triplet structure, same finiteness of bounds, same
 disjunctions) shares one CSC pattern (:class:`~twolevel.milp.model.PatternCache`), so the
-backend can be reused and updated in place (:class:`ShapeKey`).
+backend can be reused and updated in place (:func:`shape_key`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence
+from typing import Iterable, Mapping
 
 import numpy as np
 import scipy.sparse as sp
@@ -33,24 +33,30 @@ from twolevel.compiler.collision import collision_free_builtin
 from twolevel.compiler.driver import encode
 from twolevel.compiler.signals import AffineSignal
 from twolevel.compiler.types import Encoding, Requirement
+from twolevel.control.codes import MIL517
+from twolevel.control.high_level.linearisation import StepData
+from twolevel.control.high_level.settings import MPCSettings, Weights
 from twolevel.diagnostics import Diagnostic, Span
 from twolevel.milp.builder import ModelBuilder
 from twolevel.milp.model import MilpModel, PatternCache, Residuals
 from twolevel.models.params import BicycleParams
-from twolevel.control.horizon import StepData
 
-__all__ = ["Weights", "Layout", "Assembled", "assemble", "trace_signals", "shape_key", "dynamics_values",
-           "guard_values", "others_of", "set_cost"]
+__all__ = ["StepRules", "Layout", "Assembled", "assemble", "trace_signals", "shape_key", "dynamics_values",
+           "guard_values", "others_of", "set_cost", "input_bounds"]
 
 
-@dataclass(frozen=True)
-class Weights:
-    """Cost weights: ``u`` on ‖u_k‖², ``du`` on ‖u_k − u_{k−1}‖², ``track`` (4,) on (ζ − ω)² per
-    state component X, Y, ψ, v (the paper: all 1)."""
+@dataclass(frozen=True, eq=False)
+class StepRules:
+    """What the rules ask of one step: the ``requirements``, the signal ``names`` they read,
+    the recorded ``past`` samples of those signals (oldest first, now excluded), how many of
+    them the trace holds (``P``), and, for a rule being recovered, the trace index after which
+    it is required (``recover_after``)."""
 
-    u: float = 1.0
-    du: float = 1.0
-    track: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
+    requirements: tuple[Requirement, ...]
+    names: frozenset[str]
+    past: Mapping[str, np.ndarray]
+    P: int
+    recover_after: Mapping[str, int] | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -65,14 +71,14 @@ class Layout:
 
 @dataclass(eq=False)
 class Assembled:
-    """A built step model and what the encoder said."""
+    """A built step model and what the encoder said (``signals``: the rules' signals over the
+    trace, :func:`trace_signals`)."""
 
     model: MilpModel
     layout: Layout
     encoding: Encoding
     signals: dict[str, object]
     diagnostics: list[Diagnostic] = field(default_factory=list)
-    template: object = None  # the refreshable template this model belongs to, if any
 
 
 class RowMatrix:
@@ -101,7 +107,7 @@ def _affine(cols: np.ndarray, coefs: np.ndarray, offset: np.ndarray, past: np.nd
     return AffineSignal(C, np.concatenate([past, offset]))  # type: ignore[arg-type]
 
 
-def trace_signals(step: StepData, lay: Layout, n: int, past: Mapping[str, np.ndarray], names: set[str]
+def trace_signals(step: StepData, lay: Layout, n: int, past: Mapping[str, np.ndarray], names: Iterable[str]
                   ) -> dict[str, object]:
     """The signals the rules read, over the trace (P past samples, now, k = 1..H)."""
     H = lay.x.shape[0]
@@ -320,16 +326,16 @@ def set_cost(model: MilpModel, step: StepData, lay: Layout, w: Weights) -> None:
 
 
 def assemble(
-    step: StepData, requirements: Sequence[Requirement], *, H: int, dt: float, params: BicycleParams,
-    weights: Weights, past: Mapping[str, np.ndarray], P: int, names: set[str],
-    cache: PatternCache | None = None, eps: float = 1e-4, stable: bool = False, pad: float = 0.0,
-    keep: np.ndarray | None = None, recover: bool = True, recover_after: Mapping[str, int] | None = None,
+    step: StepData, rules: StepRules, settings: MPCSettings, params: BicycleParams, *,
+    cache: PatternCache | None = None, stable: bool = False, keep: np.ndarray | None = None, recover: bool = True,
 ) -> Assembled:
-    """Build the step's model (dynamics, cost, every requirement's MILCs). ``stable``: the
-    encoder's stable mode (a structure that :mod:`twolevel.control.template` can refresh), with
-    vehicle–step pairs kept within d + ``pad`` [m] (or the pair codes ``keep``). ``recover``: a rule
-    already false now by known signals is required from the first step the plan can change
-    (``MIL517`` warning) instead of making the step infeasible."""
+    """Build the step's model (dynamics, cost, every requirement's MILCs) over the horizon and
+    period of ``settings``, with its weights and margin ``eps``. ``stable``: the encoder's stable
+    mode (a structure that :mod:`twolevel.control.high_level.template` can refresh), with
+    vehicle–step pairs kept within d + ``settings.pad`` [m] (or the pair codes ``keep``).
+    ``recover``: a rule already false now by known signals is required from the first step the
+    plan can change (``MIL517`` warning) instead of making the step infeasible."""
+    H, P = settings.H, rules.P
     b = ModelBuilder()
     xb = b.add_vars("x", 4 * H, step.lo.ravel(), step.hi.ravel())
     u_lo, u_hi = input_bounds(step, params)
@@ -337,29 +343,26 @@ def assemble(
     lay = Layout(xb.idx.reshape(H, 4), ub.idx.reshape(H, 2), P)
     _dynamics(b, step, lay)
     _guards(b, step, lay)
-    sigs = trace_signals(step, lay, b.n_cols, past, names | {"x", "y"})
+    sigs = trace_signals(step, lay, b.n_cols, rules.past, rules.names | {"x", "y"})
     hc = step.hc
     T = P + 1 + H
     others = others_of(step, P)
-    cf = collision_free_builtin("x", "y", others, ids=np.asarray(hc.index, np.int64), pad=pad, keep=keep)
-    enc = encode(b, requirements, sigs, dt, eps=eps, length=T, builtins={"collision_free": cf}, stable=stable,
-                 recover=recover, recover_after=recover_after)
+    cf = collision_free_builtin("x", "y", others, ids=np.asarray(hc.index, np.int64), pad=settings.pad, keep=keep)
+    enc = encode(b, rules.requirements, sigs, settings.dt, eps=settings.eps, length=T,
+                 builtins={"collision_free": cf}, stable=stable, recover=recover, recover_after=rules.recover_after)
     model = b.build(cache)
-    _cost(model, step, lay, weights)
+    _cost(model, step, lay, settings.weights)
     diags = list(enc.diagnostics)
-    if enc.recovered:
-        from twolevel.control.codes import MIL517
-
-        for name, t, t2 in enc.recovered:
-            diags.append(MIL517(f"t = {step.t:.2f} s: rule '{name}' is already violated by known signals; "
-                                f"required from step k = {t2 - P} of the horizon on (recovering)", Span("<mpc>"),
-                                hint="the plan restores the rule as fast as the dynamics allow"))
+    for name, t, t2 in enc.recovered:
+        diags.append(MIL517(f"t = {step.t:.2f} s: rule '{name}' is already violated by known signals; "
+                            f"required from step k = {t2 - P} of the horizon on (recovering)", Span("<mpc>"),
+                            hint="the plan restores the rule as fast as the dynamics allow"))
     return Assembled(model, lay, enc, sigs, diags)
 
 
 def input_bounds(step: StepData, params: BicycleParams) -> tuple[np.ndarray, np.ndarray]:
     """Bounds (H, 2) of the inputs [δ rad, a m/s²]: the steering bound of the step (the lateral
-    acceleration limit at speed, :func:`twolevel.control.horizon.steering_bound`) and the
+    acceleration limit at speed, :func:`twolevel.control.high_level.linearisation.steering_bound`) and the
     acceleration limits."""
     H = step.A.shape[0]
     d = np.full(H, params.delta_max) if step.delta_hi is None else step.delta_hi

@@ -1,22 +1,22 @@
 """The NMPC baseline the paper compares against: one nonlinear program per step, casadi + IPOPT.
 
-Interface (the same as :class:`~twolevel.control.high_level.HighLevelController`, so the
-simulation engine can swap it in)::
+It implements :class:`~twolevel.control.planner.Planner`, as the MPC does, so the simulation
+engine can swap it in::
 
     ctrl = NmpcController(world, rulesets, settings=MPCSettings(), model="kinematic" | "fourwheel")
     ctrl, diags = NmpcController.from_world(world, model="fourwheel")   # the scenario's rule files
-    res  = ctrl.solve(ego_state, t, world_state, history)               # -> PlanResult
+    res  = ctrl.solve(ego, t, world_state, history)                     # -> PlanResult
     ctrl.reset()
 
-Same horizon H, period dt, waypoints ω (:func:`twolevel.control.horizon.prepare_step`, the
-high level's own) and cost with the weights of ``settings.weights``; the rules that can be
+Same horizon H, period dt, waypoints ω (:func:`twolevel.control.high_level.linearisation.prepare_step`,
+the high level's own) and cost with the weights of ``settings.weights``; the rules that can be
 written smoothly become constraints, chosen from what the rule sets read:
 
 * a rule reading ``v_max``: v_k ≤ v_max,k (the limit at the predicted positions), relaxed to
   what full braking allows when the ego is already too fast (v_0 + a_min·k·dt);
 * ``collision_free(d)`` in a rule: for each nearby vehicle's constant-velocity prediction an
   order-4 superellipse in its frame with semi-axes (L_i + L_ego)/2 + d and (W_i + W_ego)/2 + d
-  (:mod:`twolevel.control.nmpc_nlp`), at most ``NmpcOptions.max_obstacles`` vehicles (the nearest;
+  (:mod:`twolevel.control.nmpc.nlp`), at most ``NmpcOptions.max_obstacles`` vehicles (the nearest;
   the rest of the slots are far-away dummies);
 * a rule reading ``d_stop``: while a stop line applies (not yet served, within r_near), the ego
   stays behind the line: t_lineᵀ(p_k − p_line) ≤ 0 (t_line the route's tangent at the line), and
@@ -31,10 +31,11 @@ Anything else (e.g. ``keep_gap`` on d_lead, past operators) is not expressed; ea
 gets an ``MIL530`` warning at construction. The NLP is built once (:class:`NmpcProblem`) and
 warm-started each step from the previous solution shifted by one step, primal and dual.
 
-``ego_state``: (X, Y, ψ, v) for the kinematic model; the four-wheel model takes the full
-12-component detailed state (:mod:`twolevel.models.fourwheel`) when given one, else it starts
-from steady straight running at v. ``PlanResult.states`` is (H+1, 4) = [X, Y, ψ, v] in both
-(vx for the four-wheel model). Fields of the MILP controller that do not apply: ``mode`` empty,
+``ego``: the kinematic model plans from the pose (X, Y, ψ, v); the four-wheel model from the
+detailed state (:mod:`twolevel.models.fourwheel`) when the :class:`~twolevel.control.planner.EgoState`
+carries one, else from steady straight running at v. Either plans from its model's state: the
+step data reads its first four components, and ``PlanResult.states`` is (H+1, 4) = [X, Y, ψ, v]
+in both (vx for the four-wheel model). Fields of the MILP controller that do not apply: ``mode`` empty,
 ``binaries`` 0, ``certified`` False, ``gap`` NaN, ``rule_robustness`` {}; ``qps`` holds IPOPT's
 iteration count, ``rows``/``columns`` the NLP's constraints/variables, ``solver`` "nmpc-<model>".
 ``timings_ms``: prepare, parameters, solve (IPOPT's wall time), total. An IPOPT failure gives
@@ -50,24 +51,21 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from twolevel.control.codes import MIL515
-from twolevel.control.guards import stop_lines
-from twolevel.control.high_level import (MPCSettings, PlanResult, Snapshot, _unpack, controller_of_world,
-                                        stop_memory_of)
-from twolevel.control.horizon import StepData, prepare_step
-from twolevel.control.nmpc_nlp import MODELS, NlpSolution, NmpcProblem
-from twolevel.diagnostics import Code, Diagnostic, Severity, Span
+from twolevel.control.codes import MIL515, MIL530
+from twolevel.control.high_level.guards import stop_lines
+from twolevel.control.high_level.linearisation import StepData, prepare_step
+from twolevel.control.high_level.settings import MPCSettings
+from twolevel.control.nmpc.nlp import MODELS, NlpSolution, NmpcProblem
+from twolevel.control.planner import (EgoState, PlanResult, PlanStatus, Snapshot, WorldState, planner_of_world,
+                                      stop_memory_of)
+from twolevel.diagnostics import Diagnostic, Span
 from twolevel.models import fourwheel as fw
 from twolevel.models.params import BicycleParams, VehicleParams
 from twolevel.stl import analysis, ast
 from twolevel.stl.typecheck import RuleSet
-from twolevel.world.traffic import TrafficState
 from twolevel.world.world import World
 
-__all__ = ["NmpcOptions", "NmpcController", "MIL530", "MODELS"]
-
-MIL530 = Code("MIL530", "nmpc-rule-not-smooth", Severity.WARNING,
-              "A rule cannot be written as a smooth constraint of the NMPC baseline; the NMPC ignores it.")
+__all__ = ["NmpcOptions", "NmpcController", "LastSolution", "MODELS"]
 
 _FAR = 1.0e3  # [m] offset of the dummy obstacles
 
@@ -98,12 +96,23 @@ class NmpcOptions:
     stop_decel: float | None = None
 
 
+@dataclass(frozen=True, eq=False)
+class LastSolution:
+    """The NLP's last solution (primal and dual), made at ``t`` [s]: the next step's warm start,
+    and the controls the fallback shifts."""
+
+    t: float
+    solution: NlpSolution
+
+
 def _calls(node: ast.Node, name: str) -> list[ast.Call]:
     return [n for n in node.walk() if isinstance(n, ast.Call) and n.name == name]
 
 
 class NmpcController:
     """The paper's NMPC baseline (see the module docstring)."""
+
+    label = "nmpc"
 
     def __init__(self, world: World, rulesets: Sequence[RuleSet], settings: MPCSettings | None = None, *,
                  model: str = "kinematic", params: BicycleParams | None = None,
@@ -147,7 +156,7 @@ class NmpcController:
                                    vehicle=self.vehicle, n_obstacles=o.max_obstacles if self.d_collision is not None else 0,
                                    substeps=o.substeps, max_iter=o.max_iter, tol=o.tol, max_cpu_time=o.max_cpu_time,
                                    expand=o.expand, retry_max_iter=o.retry_max_iter)
-        self._prev: tuple[float, NlpSolution] | None = None
+        self.previous: LastSolution | None = None
         self._s_hint: float | None = None
         self.last: NlpSolution | None = None
 
@@ -157,38 +166,45 @@ class NmpcController:
                    ) -> tuple["NmpcController | None", list[Diagnostic]]:
         """The NMPC of a scenario's world with its own rule files and settings."""
         st = settings or MPCSettings(H=world.settings.H, dt=world.settings.dt, time_limit=world.settings.time_limit)
-        return controller_of_world(cls, world, st, params, model=model, options=options)
+        return planner_of_world(cls, world, st, params, model=model, options=options)
+
+    @property
+    def history_depth(self) -> int:
+        """Past samples [steps] the NMPC reads: none (no past operator is expressed)."""
+        return 0
 
     def reset(self) -> None:
         """Forget the previous solution (the next step starts cold from the reference)."""
-        self._prev = None
+        self.previous = None
         self._s_hint = None
 
     # ------------------------------------------------------------------ step data
-    def _prepare(self, ego_state: Sequence[float], t: float, world_state: TrafficState | Snapshot | None,
+    def _prepare(self, x0: np.ndarray, t: float, world_state: WorldState,
                  history: Mapping[str, np.ndarray] | None) -> StepData:
+        """The high level's step data from the model state ``x0`` (its first four components)."""
         st = self.settings
-        traffic, memory = _unpack(world_state)
+        snap = Snapshot.of(world_state)
         hist = {k: np.asarray(v, float) for k, v in (history or {}).items()}
-        memory = stop_memory_of(self.world, memory, hist, st.dt)
+        memory = stop_memory_of(self.world, snap.memory, hist, st.dt)
         u_prev = None
         if len(hist.get("delta", ())) and len(hist.get("a", ())):
             u_prev = np.array([hist["delta"][-1], hist["a"][-1]])
-        elif self._prev is not None:
-            u_prev = self.problem.unpack_w(self._prev[1].w)[1][0]
-        return prepare_step(self.world, np.asarray(ego_state, float)[:4], t, traffic, H=st.H, dt=st.dt,
-                            params=self.params, u_prev=u_prev, memory=memory, s_hint=self._s_hint)
+        elif self.previous is not None:
+            u_prev = self.problem.unpack_w(self.previous.solution.w)[1][0]
+        return prepare_step(self.world, x0[:4], t, snap.traffic, st, self.params, u_prev=u_prev, memory=memory,
+                            s_hint=self._s_hint)
 
-    def _x0(self, ego_state: Sequence[float]) -> np.ndarray:
-        e = np.asarray(ego_state, float).ravel()
+    def _x0(self, ego: EgoState) -> np.ndarray:
+        """The model's state now: the pose (kinematic), the detailed state (four-wheel), or
+        steady straight running at the pose's speed when there is no detailed state."""
         if self.model == "kinematic":
-            return e[:4].copy()
-        if e.size == fw.NX:
-            return e.copy()
-        return fw.initial_state(*(float(c) for c in e[:4]), p=self.vehicle)
+            return ego.pose[:4].copy()
+        if ego.detailed is not None and ego.detailed.size == fw.NX:
+            return ego.detailed.copy()
+        return fw.initial_state(*(float(c) for c in ego.pose[:4]), p=self.vehicle)
 
     def parameters(self, step: StepData, x0: np.ndarray) -> np.ndarray:
-        """The NLP's parameter vector for this step (see :mod:`twolevel.control.nmpc_nlp`)."""
+        """The NLP's parameter vector for this step (see :mod:`twolevel.control.nmpc.nlp`)."""
         H, dt = self.settings.H, self.settings.dt
         hc = step.hc
         route = self.world.route
@@ -229,8 +245,8 @@ class NmpcController:
         pr = self.problem
         H, m, nx = pr.H, pr.m, pr.nx
         warm = self.options.warm_start
-        if warm and self._prev is not None and abs(t - self._prev[0] - self.settings.dt) < 1e-6:
-            sol = self._prev[1]
+        if warm and self.previous is not None and abs(t - self.previous.t - self.settings.dt) < 1e-6:
+            sol = self.previous.solution
             X, U = pr.unpack_w(sol.w)
             U = np.vstack([U[1:], U[-1:]])
             X = np.vstack([X[1:], np.asarray(pr.F(X[-1], U[-1]), float).ravel()[None]])
@@ -247,15 +263,15 @@ class NmpcController:
         return pr.pack_w(X, U), None, None, "cold"
 
     # ------------------------------------------------------------------ one step
-    def solve(self, ego_state: Sequence[float], t: float, world_state: TrafficState | Snapshot | None = None,
+    def solve(self, ego: EgoState | Sequence[float], t: float, world_state: WorldState = None,
               history: Mapping[str, np.ndarray] | None = None) -> PlanResult:
         """One NMPC step (see the module docstring); numerical failures give 'fallback'."""
         tm: dict[str, float] = {}
         t0 = time.perf_counter()
-        if not np.all(np.isfinite(np.asarray(ego_state, float))):
-            return self._fail(np.asarray(ego_state, float), t, "non-finite ego state", 0, tm, t0)
-        step = self._prepare(ego_state, t, world_state, history)
-        x0 = self._x0(ego_state)
+        x0 = self._x0(EgoState.of(ego))
+        if not np.all(np.isfinite(x0)):
+            return self._fail(x0, t, "non-finite ego state", 0, tm, t0)
+        step = self._prepare(x0, t, world_state, history)
         t1 = time.perf_counter()
         tm["prepare"] = (t1 - t0) * 1e3
         p = self.parameters(step, x0)
@@ -272,9 +288,9 @@ class NmpcController:
         if sol.success:
             X, U = pr.unpack_w(sol.w)
             states = np.vstack([x0[None, :4], X[:, :4]])
-            self._prev = (t, sol)
+            self.previous = LastSolution(t, sol)
             self._s_hint = float(step.s_ref[1])
-            status = "optimal" if sol.status == "Solve_Succeeded" else "feasible"
+            status = PlanStatus.OPTIMAL if sol.status == "Solve_Succeeded" else PlanStatus.FEASIBLE
             tm["total"] = (time.perf_counter() - t0) * 1e3
             return PlanResult(status, sol.cost, U, states, np.zeros(0, np.int64), 0, pr.n_g, pr.n_w, sol.iterations,
                               False, tm, {}, msg, float("nan"), (), name)
@@ -286,12 +302,12 @@ class NmpcController:
         pr = self.problem
         U, why = self._fallback_controls()
         X = self._roll_forward(x0, U) if np.all(np.isfinite(x0)) else np.full((pr.H, pr.nx), np.nan)
-        if self._prev is not None:  # keep shifting the last good solution (duals dropped)
-            self._prev = (t, NlpSolution(pr.pack_w(X, U), np.zeros(pr.n_g), np.zeros(pr.n_w), float("nan"),
-                                         "fallback", 0, 0.0, True))
+        if self.previous is not None:  # keep shifting the last good solution (duals dropped)
+            self.previous = LastSolution(t, NlpSolution(pr.pack_w(X, U), np.zeros(pr.n_g), np.zeros(pr.n_w),
+                                                        float("nan"), "fallback", 0, 0.0, True))
         tm["total"] = (time.perf_counter() - t0) * 1e3
         diag = MIL515(f"t = {t:.2f} s: NMPC {msg}; fallback: {why}", Span(self.world.name))
-        return PlanResult("fallback", float("nan"), U, np.vstack([x0[None, :4], X[:, :4]]), np.zeros(0, np.int64), 0,
+        return PlanResult(PlanStatus.FALLBACK, float("nan"), U, np.vstack([x0[None, :4], X[:, :4]]), np.zeros(0, np.int64), 0,
                           pr.n_g, pr.n_w, iterations, False, tm, {}, f"{msg}; fallback: {why}", float("nan"),
                           (diag,), f"nmpc-{self.model}")
 
@@ -310,8 +326,8 @@ class NmpcController:
 
     def _fallback_controls(self) -> tuple[np.ndarray, str]:
         H = self.settings.H
-        if self._prev is not None:
-            U = self.problem.unpack_w(self._prev[1].w)[1]
+        if self.previous is not None:
+            U = self.problem.unpack_w(self.previous.solution.w)[1]
             return np.vstack([U[1:], U[-1:]]), "previous plan shifted"
         return np.tile([0.0, self.params.a_min], (H, 1)), "no previous plan: full braking"
 

@@ -1,6 +1,6 @@
 """Guards every MPC plan obeys besides the rules: where it may stop, and where it may drive.
 
-One definition, used by both controllers (the MILP MPC of :mod:`twolevel.control.high_level`
+One definition, used by both planners (the MILP MPC of :mod:`twolevel.control.high_level`
 and the NMPC baseline of :mod:`twolevel.control.nmpc`):
 
 * :func:`stop_lines` — the stop line the plan must keep behind at each step of the horizon: the

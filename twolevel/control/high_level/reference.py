@@ -1,0 +1,121 @@
+"""The MPC's reference over one horizon: the waypoints ω_k the plan tracks, and where it must stop.
+
+:func:`reference` projects the ego onto the route, reads the route's desired-speed profile (which
+already obeys the limits in force) forward over the horizon and gathers the solve-time
+constants of :func:`twolevel.world.signals.horizon_constants`. The reference ends with a stop
+where the plan must stop — the goal, when the route stops there, and a stop line or red light a
+rule guards (:func:`twolevel.control.high_level.guards.stop_lines`) that full braking can still
+stop before. Units: m, rad, m/s, s.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from twolevel.control.high_level.guards import stop_lines
+from twolevel.control.high_level.settings import MPCSettings
+from twolevel.models.params import BicycleParams
+from twolevel.world.geometry import Route
+from twolevel.world.signals import HorizonConstants, StopMemory, horizon_constants
+from twolevel.world.traffic import TrafficState
+from twolevel.world.world import World
+
+__all__ = ["Reference", "reference", "reference_controls", "braking", "wrap_to"]
+
+
+@dataclass(frozen=True, eq=False)
+class Reference:
+    """The ego's station now (``s0``, ``e0`` [m] along and across the route), the waypoints'
+    route positions ``s_ref`` (H+1,) [m] and speeds ``v_ref`` (H+1,) [m/s], the waypoints
+    ``omega`` (H, 4) = (X, Y, ψ, v) for k = 1..H, the solve-time constants ``hc`` along them,
+    and where full braking from now ends the horizon: ``d_brake`` [m] further, at ``v_brake`` [m/s]."""
+
+    s0: float
+    e0: float
+    s_ref: np.ndarray
+    v_ref: np.ndarray
+    omega: np.ndarray
+    hc: HorizonConstants
+    d_brake: float
+    v_brake: float
+
+
+def wrap_to(angle: np.ndarray | float, ref: float) -> np.ndarray:
+    """``angle`` shifted by a multiple of 2π to lie within π of ``ref`` [rad]."""
+    return ref + np.mod(np.asarray(angle, float) - ref + math.pi, 2 * math.pi) - math.pi
+
+
+def reference_controls(route_kappa: np.ndarray, v_ref: np.ndarray, dt: float, params: BicycleParams
+                       ) -> np.ndarray:
+    """The controls (H, 2) [δ rad, a m/s²] that follow the route's curvature ``route_kappa`` (H,)
+    [1/m] at the reference speeds ``v_ref`` (H+1,) [m/s], within the bicycle's limits."""
+    delta = np.clip(np.arctan(params.l_f * route_kappa), -params.delta_max, params.delta_max)
+    acc = np.clip(np.diff(v_ref) / dt, params.a_min, params.a_max)
+    return np.stack([delta, acc], axis=1)
+
+
+def braking(v0: float, H: int, dt: float, params: BicycleParams) -> tuple[float, float]:
+    """Distance [m] and speed [m/s] after H steps of full braking from ``v0`` (no reversing)."""
+    v = v0 + params.a_min * dt * np.arange(1, H + 1)
+    t_stop = v0 / -params.a_min
+    T = min(H * dt, t_stop)
+    return v0 * T + 0.5 * params.a_min * T * T, max(float(v[-1]), 0.0)
+
+
+def _reference_to(route: Route, s0: float, v0: float, H: int, dt: float, s_end: float, decel: float,
+                  a_max: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
+    """Like :meth:`~twolevel.world.geometry.Route.reference`, but ending with a stop at
+    ``s_end`` [m]: the target speed is at most sqrt(2·``decel``·(s_end − s)), the reference brakes
+    as hard as reaching it needs, and positions never pass ``s_end``."""
+    s = np.empty(H + 1)
+    v = np.empty(H + 1)
+    s[0], v[0] = s0, v0
+    for k in range(H):  # H ≈ 10 scalar steps
+        d = max(s_end - s[k], 0.0)
+        target = min(float(route.desired_speed_at(s[k])), math.sqrt(2.0 * decel * d))
+        need = v[k] * v[k] / (2.0 * max(d, 1e-3))
+        v[k + 1] = min(max(target, v[k] - max(a_max, need) * dt, 0.0), v[k] + a_max * dt)
+        s[k + 1] = min(s[k] + 0.5 * (v[k] + v[k + 1]) * dt, max(s_end, s[k]))
+        if s[k + 1] >= s_end - 1e-9:
+            v[k + 1] = 0.0
+    return s, v
+
+
+def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, settings: MPCSettings,
+              params: BicycleParams, *, memory: StopMemory | None = None, s_hint: float | None = None,
+              stop_rules: tuple[bool, bool] = (False, False)) -> Reference:
+    """The reference at time ``t`` [s] for ego state ``x0`` = (X, Y, ψ, v): the ego is projected
+    near ``s_hint`` [m] when given (else onto the whole route); ``stop_rules`` = (a rule reads
+    d_stop, a rule reads light_red/d_light) says which lines the reference stops before (at
+    ``settings.stop_decel``, ``settings.stop_margin`` before the line)."""
+    H, dt = settings.H, settings.dt
+    route = world.route
+    if s_hint is not None and math.isfinite(s_hint):
+        s_arr, e_arr = route.project_near(x0[None, :2], np.array([s_hint]), 15.0)
+    else:
+        s_arr, e_arr = route.local_coordinates(x0[None, :2])
+    s0 = float(s_arr[0])
+    s_ref, v_ref = route.reference(s0, max(float(x0[3]), 0.0), H, dt)
+    hc = horizon_constants(world, traffic, t, x0, H=H, dt=dt, s_pred=s_ref, memory=memory,
+                           station=(s0, float(e_arr[0])))
+    # the reference ends with a stop where the plan must stop: the goal (when the route stops
+    # there) and a stop line / red light a rule guards that full braking can still stop before
+    d_brake, v_brake = braking(float(x0[3]), H, dt, params)
+    s_end = float(route.s[-1]) if route.v_des.size and route.v_des[-1] <= 1e-9 else math.inf
+    if any(stop_rules):
+        lines = stop_lines(hc, stop=stop_rules[0], light=stop_rules[1])
+        s_near = float(min(lines[0], lines[-1]))
+        if s0 + d_brake <= s_near + 1e-6:
+            s_end = min(s_end, max(s_near - settings.stop_margin, s0))
+    if math.isfinite(s_end):
+        s_ref, v_ref = _reference_to(route, s0, max(float(x0[3]), 0.0), H, dt, s_end, settings.stop_decel)
+        hc = replace(hc, s_ref=s_ref, v_max=route.limit_at(s_ref).astype(float))
+    v_ref = np.minimum(v_ref, route.limit_at(s_ref))
+    pts = route.position(s_ref)
+    head = wrap_to(route.heading_at(s_ref), float(x0[2]))
+    head = x0[2] + np.concatenate([[0.0], np.cumsum(wrap_to(np.diff(head), 0.0))])
+    omega = np.column_stack([pts[1:], head[1:], v_ref[1:]])
+    return Reference(s0, float(e_arr[0]), s_ref, v_ref, omega, hc, d_brake, v_brake)
