@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from twolevel.control import low_level as ll
+from twolevel.control.low_level import controller as ll
 from twolevel.sim.engine import simulate_scenario
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -6,9 +6,10 @@ from pathlib import Path
 
 import numpy as np
 
-from twolevel.control.low_level import LowLevelController, LowLevelSettings
-from twolevel.world.sensing import Memory
+from twolevel.control.low_level.controller import LowLevelController
+from twolevel.control.low_level.settings import LowLevelSettings
 from twolevel.models import fourwheel as fw
+from twolevel.world.sensing import Memory
 
 from mpc_worlds import highway_world
 

@@ -9,10 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from twolevel.control.low_level import LowLevelController, LowLevelSettings, prefix_bounded
-from twolevel.world.sensing import Memory
+from twolevel.control.low_level import sampling
+from twolevel.control.low_level.controller import LowLevelController
+from twolevel.control.low_level.rules import prefix_bounded
+from twolevel.control.low_level.settings import LowLevelSettings
 from twolevel.models import fourwheel as fw
 from twolevel.stl.parser import parse
+from twolevel.world.sensing import Memory
 
 from mpc_worlds import highway_world
 
@@ -34,9 +37,9 @@ def _pair(w, rs, v: float, u: np.ndarray, *, samples: int = 200, step: int = 0, 
         x0 = fw.initial_state(w.ego.x, w.ego.y + y, w.ego.psi if psi is None else psi, v)
         out.append((ll, ll.decide(x0, u, 0.0, w.traffic0, Memory.fresh(w), 20.0, None, step=step)))
     (off_ll, off), *screened = out
-    assert not off_ll._screen
+    assert not off_ll.screens
     for on_ll, on in screened:
-        assert on_ll._screen
+        assert on_ll.screens
         assert on.decision == off.decision and on.candidates == off.candidates
         np.testing.assert_array_equal(on.control, off.control)
         np.testing.assert_array_equal(on.states, off.states)
@@ -48,14 +51,14 @@ def _pair(w, rs, v: float, u: np.ndarray, *, samples: int = 200, step: int = 0, 
 def kept(monkeypatch: pytest.MonkeyPatch) -> list[tuple[int, int]]:
     """(survivors, candidates) of every screened round (of every screening setting tried)."""
     out: list[tuple[int, int]] = []
-    orig = LowLevelController._screened
+    orig = sampling.screen
 
-    def spy(self, *a, **k):  # noqa: ANN001, ANN002, ANN003, ANN202
-        keep, pruned, bound = orig(self, *a, **k)
-        out.append((int(keep.sum()), len(keep)))
-        return keep, pruned, bound
+    def spy(*a, **k):  # noqa: ANN002, ANN003, ANN202
+        scr = orig(*a, **k)
+        out.append((int(scr.keep.sum()), len(scr.keep)))
+        return scr
 
-    monkeypatch.setattr(LowLevelController, "_screened", spy)
+    monkeypatch.setattr(sampling, "screen", spy)
     return out
 
 

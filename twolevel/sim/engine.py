@@ -159,7 +159,7 @@ class _Loop:
 
     def __init__(self, world: Any, scn: Any, hl: Any, ll: Any, rulesets: list[Any], monitor: bool,
                  controller: str) -> None:
-        from twolevel.control.low_level import rule_checks
+        from twolevel.control.low_level.rules import rule_checks
         from twolevel.models.params import VehicleParams
 
         self.world, self.scn, self.hl, self.ll = world, scn, hl, ll
@@ -173,7 +173,7 @@ class _Loop:
     @classmethod
     def create(cls, world: Any, scn: Any, *, monitor: bool, controller: str) -> tuple["_Loop | None", list[Diagnostic]]:
         from twolevel.control.high_level.controller import HighLevelController
-        from twolevel.control.low_level import LowLevelController
+        from twolevel.control.low_level.controller import LowLevelController
         from twolevel.world.world import load_rulesets
 
         sets, diags = load_rulesets(world)
@@ -362,7 +362,7 @@ class _Loop:
             if self.monitor:
                 dec = self.ll.decide(x, u_star, t, traffic, memory, s0, past, target=plan.states, step=k,
                                      now=others)
-                control, accel, decision, tried = dec.control, dec.accel, dec.decision, dec.candidates
+                control, accel, decision, tried = dec.control, dec.accel, dec.decision.value, dec.candidates
                 why = " ".join(dec.violated)
             else:
                 why = ""

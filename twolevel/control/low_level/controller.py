@@ -1,0 +1,123 @@
+"""The low-level controller: the paper's runtime monitor on the detailed model.
+
+Each step, given the MPC's optimal controls u* = [δ, a] over the horizon:
+
+1. forward-simulate the detailed four-wheel Pacejka model from the ego's current detailed
+   state under u* (:mod:`twolevel.control.low_level.prediction`);
+2. judge every rule on the predicted trajectory (:mod:`twolevel.control.low_level.judge`: the
+   world's signal definitions and the batched offline monitor);
+3. if every rule holds, apply u*_0 (decision ``mpc``); otherwise sample candidates in the ball
+   of radius r around u* (:mod:`twolevel.control.low_level.sampling`, screened on prefixes by
+   :mod:`twolevel.control.low_level.screening`; decision ``sampled``: the best-cost candidate
+   that satisfies every rule); if none of the sampling budget does, brake fully (decision
+   ``brake``) — or, for a standing car where braking is worse, apply the least-violating
+   choice (decision ``least_violation``; :mod:`twolevel.control.low_level.brake`).
+
+The answer is a :class:`~twolevel.control.low_level.decision.Decision`; the rules as the low
+level judges them are :class:`~twolevel.control.low_level.rules.RuleCheck` s.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from twolevel.control.low_level.brake import STANDING, full_brake, prefer_least_violation
+from twolevel.control.low_level.decision import Choice, Decision, Verdict
+from twolevel.control.low_level.judge import Judge, history_length
+from twolevel.control.low_level.prediction import Predictor
+from twolevel.control.low_level.rules import RuleCheck, prefix_bounded, rule_checks
+from twolevel.control.low_level.sampling import sample_ball
+from twolevel.control.low_level.settings import LowLevelSettings
+from twolevel.models.actuation import gamma_from_accel
+from twolevel.models.params import VehicleParams
+from twolevel.stl import analysis
+from twolevel.stl.typecheck import RuleSet
+from twolevel.world.sensing import Memory, Others, others_predicted
+from twolevel.world.traffic import TrafficState
+from twolevel.world.world import World
+
+__all__ = ["LowLevelController"]
+
+
+class LowLevelController:
+    """The paper's bottom level (see the module docstring)."""
+
+    def __init__(self, world: World, rules: Sequence[RuleCheck], *, params: VehicleParams | None = None,
+                 settings: LowLevelSettings | None = None, consts: Mapping[str, float] | None = None) -> None:
+        self.world = world
+        self.rules = list(rules)
+        self.params = params or VehicleParams()
+        self.settings = settings or LowLevelSettings(r=world.settings.r, samples=world.settings.samples,
+                                                     seed=world.settings.seed)
+        self.consts = dict(consts or {})
+        self.H = world.settings.H
+        self.dt = world.settings.dt
+        self.past = max((r.past for r in self.rules), default=0)
+        reads_a = any("a" in analysis.signals_read(r.formula) for r in self.rules)
+        self.predictor = Predictor(self.params, self.H, self.dt, self.settings.backend, reads_a)
+        self.cuts = tuple(sorted({j for j in self.settings.screen if 0 < j < self.H}))
+        self._screens = bool(self.cuts) and bool(self.rules) and all(prefix_bounded(r.formula) for r in self.rules)
+
+    @classmethod
+    def from_rulesets(cls, world: World, rulesets: Sequence[RuleSet], **kw: object) -> "LowLevelController":
+        rules, consts = rule_checks(rulesets, world.settings.dt)
+        return cls(world, rules, consts=consts, **kw)  # type: ignore[arg-type]
+
+    @property
+    def screens(self) -> bool:
+        """Whether candidates are screened on prefixes (cuts set and every rule prefix-bounded)."""
+        return self._screens
+
+    def warm_up(self, x0: np.ndarray) -> None:
+        """Build (and compile) the rollout functions for every batch size used, so the first
+        intervention does not pay for it."""
+        self.predictor.warm_up(x0, set(self.settings.round_sizes()), self.cuts[0] if self._screens else None)
+
+    def decide(self, x0: np.ndarray, u_star: np.ndarray, t: float, traffic: TrafficState, memory: Memory, s0: float,
+               history: Mapping[str, np.ndarray] | None = None, *, target: np.ndarray | None = None,
+               step: int = 0, now: Others | None = None) -> Decision:
+        """The control to apply now from the detailed state ``x0`` (12,), the MPC's controls
+        ``u_star`` (H, 2) [δ rad, a m/s²], time ``t`` [s], the traffic now, the sensing memory
+        before this step, the ego's route position ``s0`` [m], the recorded ``history`` of every
+        signal (oldest first, excluding now), the plan's states ``target`` (H+1, 4) [X, Y, ψ, v]
+        and the step number (seeds the sampling); ``now``: the vehicles sensed now
+        (:func:`~twolevel.world.sensing.others_now` at x0, s0), when the caller has them."""
+        tm: dict[str, float] = {}
+        t_start = time.perf_counter()
+        st, H, dt = self.settings, self.H, self.dt
+        u_star = np.asarray(u_star, dtype=float).reshape(H, 2)
+        x0 = np.asarray(x0, dtype=float)
+        v_now = float(x0[3])
+        others = others_predicted(self.world, traffic, float(x0[0]), float(x0[1]), s0, H, dt, now=now)
+        P = history_length(history, self.past)
+        judge = Judge(self.world, self.rules, self.consts, dt, t, memory, others, s0, history or {}, P, tm)
+
+        ro = self.predictor.plan(x0, u_star, tm)
+        gamma_star = gamma_from_accel(u_star[:, 1], ro.states[0, :-1, 3], self.params)
+        rob = judge(ro.states, u_star[None, :, 1], u_star[None, :, 0])
+        mpc_rob = {k: float(v[0]) for k, v in rob.items()}
+        mpc = Choice(min(mpc_rob.values()) if mpc_rob else np.inf, np.array([u_star[0, 0], gamma_star[0]]),
+                     float(u_star[0, 1]), mpc_rob, ro.states[0])
+        if all(v >= 0 for v in mpc_rob.values()):
+            return self._done(Verdict.MPC, mpc, 0, mpc_rob, tm, t_start)
+
+        target = ro.states[0][:, [0, 1, 2, 3]] if target is None else np.asarray(target, dtype=float)
+        rng = np.random.default_rng((st.seed, step))
+        exact_worst = st.least_violation and abs(v_now) < STANDING  # the least-violating choice needs it
+        sampled = sample_ball(x0, u_star, gamma_star, target, mpc if rob else None, st, rng, self.predictor, judge,
+                              self.cuts, self._screens, exact_worst, tm)
+        if sampled.found is not None:
+            return self._done(Verdict.SAMPLED, sampled.found, sampled.tried, mpc_rob, tm, t_start)
+        braking = full_brake(x0, u_star, self.predictor, judge, tm)
+        if prefer_least_violation(sampled.best, braking, v_now, st.least_violation):
+            assert sampled.best is not None
+            return self._done(Verdict.LEAST_VIOLATION, sampled.best, sampled.tried, mpc_rob, tm, t_start)
+        return self._done(Verdict.BRAKE, braking, sampled.tried, mpc_rob, tm, t_start)
+
+    def _done(self, verdict: Verdict, choice: Choice, tried: int, mpc_rob: dict[str, float], tm: dict[str, float],
+              t_start: float) -> Decision:
+        tm["total"] = (time.perf_counter() - t_start) * 1e3
+        return Decision(verdict, choice.control, choice.accel, tried, choice.robustness, mpc_rob, choice.states, tm)

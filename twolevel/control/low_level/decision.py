@@ -1,0 +1,62 @@
+"""The low level's answer for one step: which choice it applied, and why."""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["Verdict", "Choice", "Decision"]
+
+
+class Verdict(str, enum.Enum):
+    """Which control the low level applied."""
+
+    MPC = "mpc"
+    """u*, the MPC's first control: every rule holds on the detailed prediction."""
+    SAMPLED = "sampled"
+    """The best-cost candidate of the ball around u* that satisfies every rule."""
+    BRAKE = "brake"
+    """Full braking: nothing in the sampling budget satisfies every rule."""
+    LEAST_VIOLATION = "least_violation"
+    """The least-violating choice (u* or a candidate) of a standing car, where braking is worse."""
+
+
+@dataclass(frozen=True, eq=False)
+class Choice:
+    """A control the low level can apply: the ``control`` now [δ rad, γ], the ``accel`` [m/s²]
+    γ commands at the current speed, each rule's ``robustness`` at t + dt, the ``worst`` of them,
+    and the predicted detailed trajectory ``states`` (H+1, 12)."""
+
+    worst: float
+    control: np.ndarray
+    accel: float
+    robustness: dict[str, float]
+    states: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class Decision:
+    """The low level's answer for one step.
+
+    ``decision``: the :class:`Verdict`; ``control`` = [δ rad, γ] applied now; ``accel``
+    [m/s²]: the acceleration that γ commands at the current speed (quasi-static);
+    ``candidates``: sampled candidates evaluated (0 when u* held); ``robustness``: each rule's
+    robustness at t + dt for the applied choice (for ``brake``: the braking rollout's);
+    ``mpc_robustness``: u*'s; ``states`` (H+1, 12): the applied choice's predicted detailed
+    trajectory; ``timings_ms``: rollout / signals / monitor / total."""
+
+    decision: Verdict
+    control: np.ndarray
+    accel: float
+    candidates: int
+    robustness: dict[str, float]
+    mpc_robustness: dict[str, float]
+    states: np.ndarray
+    timings_ms: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def violated(self) -> tuple[str, ...]:
+        """Rules u* violated (why the low level intervened)."""
+        return tuple(k for k, v in self.mpc_robustness.items() if not v >= 0)
