@@ -226,7 +226,7 @@ def plan(
     """
     import json
 
-    from twolevel.control.planning import plan_scenario
+    from twolevel.pipeline.planning import plan_scenario
 
     report_, diags = plan_scenario(scenario, solver=solver, at=at, trace=trace, emit=emit, time_limit=time_limit)
     _print_diagnostics(diags)

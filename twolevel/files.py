@@ -18,7 +18,7 @@ import stat
 from dataclasses import dataclass
 from typing import BinaryIO, Literal
 
-__all__ = ["Refusal", "open_regular", "read_regular"]
+__all__ = ["Refusal", "open_regular", "read_regular", "read_text_quietly"]
 
 RefusalKind = Literal["missing", "directory", "special", "denied", "error", "too-large"]
 
@@ -98,3 +98,10 @@ def read_regular(path: str | os.PathLike[str], limit: int) -> tuple[bytes | None
     if len(data) > limit:  # grew since fstat
         return None, Refusal("too-large", "larger than the limit", len(data))
     return data, None
+
+
+def read_text_quietly(path: str, limit: int = 1 << 20) -> str:
+    """The text of a regular file up to ``limit`` bytes, for showing source lines; "" for
+    anything else (a FIFO or a device would block or never end)."""
+    data, _ = read_regular(path, limit)
+    return "" if data is None else data.decode("utf-8", errors="replace")

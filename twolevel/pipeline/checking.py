@@ -1,8 +1,8 @@
-"""The stages of twolevel as plain functions returning values and diagnostics.
+"""``twolevel check``: rule files, maps and scenarios checked without solving anything.
 
-``check`` (rules, maps, scenarios; no solving) and ``monitor`` (rules over a recorded trace) live
-here; the CLI only chooses output formats and exit codes. Heavy modules are imported inside the
-functions that need them, so ``twolevel check`` never loads numpy or a solver.
+Returns the findings as diagnostics (:class:`CheckResult`); the CLI only chooses the output
+format and the exit code (:func:`exit_code`). Heavy modules are imported inside the functions
+that need them, so ``twolevel check`` never loads numpy or a solver.
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Iterable, Mapping, Sequence
 
 from twolevel.diagnostics import Code, Diagnostic, Severity, Span
+from twolevel.files import read_text_quietly
 
 RULE_SUFFIXES = (".stl",)
 YAML_SUFFIXES = (".yaml", ".yml")
@@ -109,7 +110,7 @@ def check(paths: Sequence[str], *, dt: float | None = None, horizon: int | None 
             from twolevel.world.loader import check_world_file
 
             diags.extend(check_world_file(file))
-            sources.setdefault(file, _read_text_quietly(file))
+            sources.setdefault(file, read_text_quietly(file))
     return CheckResult(tuple(dedupe(diags)), len(files), sources)
 
 
@@ -125,63 +126,9 @@ def dedupe(diags: Iterable[Diagnostic]) -> list[Diagnostic]:
     return out
 
 
-def _read_text_quietly(path: str, limit: int = 1 << 20) -> str:
-    """The text of a regular file up to ``limit`` bytes, for showing source lines; "" for
-    anything else (a FIFO or a device would block or never end)."""
-    from twolevel.files import read_regular
-
-    data, _ = read_regular(path, limit)
-    return "" if data is None else data.decode("utf-8", errors="replace")
-
-
 def exit_code(diags: Iterable[Diagnostic], *, strict: bool = False, exit_zero: bool = False) -> int:
     """0 clean, 1 errors (warnings too under ``strict``); ``exit_zero`` forces 0."""
     if exit_zero:
         return 0
     fail = {Severity.ERROR} | ({Severity.WARNING} if strict else set())
     return 1 if any(d.severity in fail for d in diags) else 0
-
-
-@dataclass(frozen=True)
-class MonitorResult:
-    """What ``monitor`` found: the per-rule verdicts (``None`` when it could not run) and every
-    diagnostic about the rule file and the trace."""
-
-    report: object | None  # twolevel.monitor.tracefile.MonitorReport (kept untyped: lazy import)
-    diagnostics: tuple[Diagnostic, ...]
-    sources: Mapping[str, str] = field(default_factory=dict)
-
-    @property
-    def violated(self) -> bool:
-        """True when some rule's robustness falls below zero at some time of the trace."""
-        return bool(self.report is not None and getattr(self.report, "violated"))
-
-
-def monitor(
-    rules_path: str,
-    trace_path: str,
-    *,
-    dt: float | None = None,
-    consts: Mapping[str, float] | None = None,
-    series: bool = False,
-) -> MonitorResult:
-    """Evaluate every named formula of ``rules_path`` over the recorded trace ``trace_path``
-    (offline, RTAMT's discrete-time semantics). ``consts`` bind or override the rule file's
-    constants; ``dt`` [s] overrides the period read from the time column."""
-    from twolevel.monitor.tracefile import monitor_trace, read_trace
-    from twolevel.stl.lint import load_ruleset
-
-    trace, diags = read_trace(trace_path, dt=dt)
-    sources = {rules_path: _read_text_quietly(rules_path)}
-    if trace is None or any(d.is_error for d in diags):
-        ruleset, rule_diags = load_ruleset(rules_path, consts)  # still report the rule file's findings
-        return MonitorResult(None, tuple(rule_diags + diags), sources)
-    # the trace's period decides the windows: an interval that is not a multiple of it (STL209)
-    # would be silently rounded to whole samples
-    ruleset, rule_diags = load_ruleset(rules_path, consts, dt=trace.dt)
-    diags = rule_diags + diags
-    if ruleset is None:
-        return MonitorResult(None, tuple(diags), sources)
-    report, run_diags = monitor_trace(ruleset.rules, dict(ruleset.consts), trace, series=series)
-    diags += run_diags
-    return MonitorResult(report, tuple(diags), sources)

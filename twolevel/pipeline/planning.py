@@ -15,12 +15,23 @@ import csv
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 
 from twolevel.control.codes import MIL511, MIL512, MIL513, MIL514, MIL516
+from twolevel.control.high_level.controller import HighLevelController
+from twolevel.control.high_level.linearisation import StepData
+from twolevel.control.high_level.settings import SOLVERS, MPCSettings
 from twolevel.diagnostics import Diagnostic, Span
+from twolevel.milp.highs import solve_highs, write_model
+from twolevel.milp.l1_surrogate import l1_surrogate
+from twolevel.milp.solution import Status
+from twolevel.world.loader import load_scenario
+from twolevel.world.signals import signals_along
+from twolevel.world.traffic import EgoBox
+from twolevel.world.traffic import step as traffic_step
+from twolevel.world.world import build_world
 
 __all__ = ["PlanReport", "plan_scenario", "explain_infeasibility"]
 
@@ -105,12 +116,10 @@ def _read_trace(path: str, at: float) -> tuple[dict[str, np.ndarray] | None, lis
     return {k: v[: i + 1] for k, v in cols.items()}, []
 
 
-def explain_infeasibility(ctrl: Any, step: Any, past: Any, P: int) -> tuple[str, ...]:
+def explain_infeasibility(ctrl: HighLevelController, step: StepData, past: Mapping[str, np.ndarray], P: int
+                          ) -> tuple[str, ...]:
     """The rules that conflict: the smallest set (single rules first, then pairs) whose removal
     makes the step feasible; empty when even no rules is infeasible or nothing single/pairwise helps."""
-    from twolevel.milp.highs import solve_highs
-    from twolevel.milp.solution import Status
-
     names = [r.name for r in ctrl.rules]
 
     def feasible(drop: frozenset[str]) -> bool:
@@ -137,11 +146,6 @@ def plan_scenario(
     emit: str | None = None, time_limit: float | None = 10.0,
 ) -> tuple[PlanReport | None, list[Diagnostic]]:
     """Solve one MPC step of a scenario (see the module docstring). ``time_limit`` [s] per solve."""
-    from twolevel.control.high_level.controller import HighLevelController
-    from twolevel.control.high_level.settings import SOLVERS, MPCSettings
-    from twolevel.world.loader import load_scenario
-    from twolevel.world.world import build_world
-
     span = Span(str(scenario_path))
     if solver not in SOLVERS:
         return None, [MIL512(f"unknown solver '{solver}'", span, hint=f"choose one of {', '.join(SOLVERS)}")]
@@ -160,9 +164,6 @@ def plan_scenario(
     diags += d2
     if ctrl is None:
         return None, diags
-    from twolevel.world.signals import signals_along
-    from twolevel.world.traffic import EgoBox, step as traffic_step
-
     e = world.ego
     ego = np.array([e.x, e.y, e.psi, e.v])
     traffic = world.traffic0
@@ -200,9 +201,6 @@ def plan_scenario(
                             hint="dropping any one of the named rules makes the problem feasible"))
     emitted = None
     if emit is not None:
-        from twolevel.milp.highs import write_model
-        from twolevel.milp.l1_surrogate import l1_surrogate
-
         ctrl.reset()
         step, past_s, P = ctrl.prepare(ego, t0, traffic, history)
         asm = ctrl.build(step, past_s, P)

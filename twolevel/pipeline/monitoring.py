@@ -1,0 +1,60 @@
+"""``twolevel monitor``: every rule of a rule file evaluated over a recorded trace (offline).
+
+Returns the verdicts and the diagnostics (:class:`MonitorResult`); the CLI renders them.
+Heavy modules are imported inside :func:`monitor`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Mapping
+
+from twolevel.diagnostics import Diagnostic
+from twolevel.files import read_text_quietly
+
+__all__ = ["MonitorResult", "monitor"]
+
+
+@dataclass(frozen=True)
+class MonitorResult:
+    """What ``monitor`` found: the per-rule verdicts (``None`` when it could not run) and every
+    diagnostic about the rule file and the trace."""
+
+    report: object | None  # twolevel.monitor.tracefile.MonitorReport (kept untyped: lazy import)
+    diagnostics: tuple[Diagnostic, ...]
+    sources: Mapping[str, str] = field(default_factory=dict)
+
+    @property
+    def violated(self) -> bool:
+        """True when some rule's robustness falls below zero at some time of the trace."""
+        return bool(self.report is not None and getattr(self.report, "violated"))
+
+
+def monitor(
+    rules_path: str,
+    trace_path: str,
+    *,
+    dt: float | None = None,
+    consts: Mapping[str, float] | None = None,
+    series: bool = False,
+) -> MonitorResult:
+    """Evaluate every named formula of ``rules_path`` over the recorded trace ``trace_path``
+    (offline, RTAMT's discrete-time semantics). ``consts`` bind or override the rule file's
+    constants; ``dt`` [s] overrides the period read from the time column."""
+    from twolevel.monitor.tracefile import monitor_trace, read_trace
+    from twolevel.stl.lint import load_ruleset
+
+    trace, diags = read_trace(trace_path, dt=dt)
+    sources = {rules_path: read_text_quietly(rules_path)}
+    if trace is None or any(d.is_error for d in diags):
+        ruleset, rule_diags = load_ruleset(rules_path, consts)  # still report the rule file's findings
+        return MonitorResult(None, tuple(rule_diags + diags), sources)
+    # the trace's period decides the windows: an interval that is not a multiple of it (STL209)
+    # would be silently rounded to whole samples
+    ruleset, rule_diags = load_ruleset(rules_path, consts, dt=trace.dt)
+    diags = rule_diags + diags
+    if ruleset is None:
+        return MonitorResult(None, tuple(diags), sources)
+    report, run_diags = monitor_trace(ruleset.rules, dict(ruleset.consts), trace, series=series)
+    diags += run_diags
+    return MonitorResult(report, tuple(diags), sources)
