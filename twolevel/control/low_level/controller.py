@@ -25,7 +25,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from twolevel.control.low_level.brake import STANDING, full_brake, prefer_least_violation
-from twolevel.control.low_level.decision import Choice, Decision, Verdict
+from twolevel.control.low_level.decision import Action, Choice, Decision
 from twolevel.control.low_level.judge import Judge, history_length
 from twolevel.control.low_level.prediction import Predictor
 from twolevel.control.low_level.rules import RuleCheck, prefix_bounded, rule_checks
@@ -102,7 +102,7 @@ class LowLevelController:
         mpc = Choice(min(mpc_rob.values()) if mpc_rob else np.inf, np.array([u_star[0, 0], gamma_star[0]]),
                      float(u_star[0, 1]), mpc_rob, ro.states[0])
         if all(v >= 0 for v in mpc_rob.values()):
-            return self._done(Verdict.MPC, mpc, 0, mpc_rob, tm, t_start)
+            return self._done(Action.MPC, mpc, 0, mpc_rob, tm, t_start)
 
         target = ro.states[0][:, [0, 1, 2, 3]] if target is None else np.asarray(target, dtype=float)
         rng = np.random.default_rng((st.seed, step))
@@ -110,14 +110,14 @@ class LowLevelController:
         sampled = sample_ball(x0, u_star, gamma_star, target, mpc if rob else None, st, rng, self.predictor, judge,
                               self.cuts, self._screens, exact_worst, tm)
         if sampled.found is not None:
-            return self._done(Verdict.SAMPLED, sampled.found, sampled.tried, mpc_rob, tm, t_start)
+            return self._done(Action.SAMPLED, sampled.found, sampled.tried, mpc_rob, tm, t_start)
         braking = full_brake(x0, u_star, self.predictor, judge, tm)
         if prefer_least_violation(sampled.best, braking, v_now, st.least_violation):
             assert sampled.best is not None
-            return self._done(Verdict.LEAST_VIOLATION, sampled.best, sampled.tried, mpc_rob, tm, t_start)
-        return self._done(Verdict.BRAKE, braking, sampled.tried, mpc_rob, tm, t_start)
+            return self._done(Action.LEAST_VIOLATION, sampled.best, sampled.tried, mpc_rob, tm, t_start)
+        return self._done(Action.BRAKE, braking, sampled.tried, mpc_rob, tm, t_start)
 
-    def _done(self, verdict: Verdict, choice: Choice, tried: int, mpc_rob: dict[str, float], tm: dict[str, float],
+    def _done(self, action: Action, choice: Choice, tried: int, mpc_rob: dict[str, float], tm: dict[str, float],
               t_start: float) -> Decision:
         tm["total"] = (time.perf_counter() - t_start) * 1e3
-        return Decision(verdict, choice.control, choice.accel, tried, choice.robustness, mpc_rob, choice.states, tm)
+        return Decision(action, choice.control, choice.accel, tried, choice.robustness, mpc_rob, choice.states, tm)

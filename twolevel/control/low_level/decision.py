@@ -7,11 +7,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Verdict", "Choice", "Decision"]
+__all__ = ["Action", "Choice", "Decision"]
 
 
-class Verdict(str, enum.Enum):
-    """Which control the low level applied."""
+class Action(str, enum.Enum):
+    """Which control the low level applied (the trace's ``decision``)."""
 
     MPC = "mpc"
     """u*, the MPC's first control: every rule holds on the detailed prediction."""
@@ -40,14 +40,14 @@ class Choice:
 class Decision:
     """The low level's answer for one step.
 
-    ``decision``: the :class:`Verdict`; ``control`` = [δ rad, γ] applied now; ``accel``
+    ``decision``: the :class:`Action`; ``control`` = [δ rad, γ] applied now; ``accel``
     [m/s²]: the acceleration that γ commands at the current speed (quasi-static);
     ``candidates``: sampled candidates evaluated (0 when u* held); ``robustness``: each rule's
     robustness at t + dt for the applied choice (for ``brake``: the braking rollout's);
     ``mpc_robustness``: u*'s; ``states`` (H+1, 12): the applied choice's predicted detailed
     trajectory; ``timings_ms``: rollout / signals / monitor / total."""
 
-    decision: Verdict
+    decision: Action
     control: np.ndarray
     accel: float
     candidates: int
