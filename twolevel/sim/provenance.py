@@ -1,0 +1,66 @@
+"""What ``run.json`` records about a run's origin: the scenario, map and rule files with their
+SHA-256 hashes, the settings, the software versions and the machine."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import platform
+from importlib import metadata
+from typing import Any, Sequence
+
+from twolevel.sim.frames import map_lines
+from twolevel.world.loader import Scenario
+from twolevel.world.world import World
+
+__all__ = ["run_metadata", "sha256_of", "versions", "cpus"]
+
+
+def sha256_of(path: str) -> str:
+    """The SHA-256 of a file's bytes (hex)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 16), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def versions() -> dict[str, str]:
+    """Python's and the numerical packages' versions."""
+    out = {"python": platform.python_version()}
+    for dist in ("numpy", "scipy", "casadi", "highspy", "clarabel", "twolevel"):
+        try:
+            out[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            out[dist] = "not installed"
+    return out
+
+
+def cpus() -> int:
+    """CPUs this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def run_metadata(world: World, scn: Scenario, *, monitor: bool, controller: str, timing_columns: Sequence[str]
+                 ) -> dict[str, Any]:
+    """The provenance part of ``run.json`` for a run of ``scn`` (its ``world``) with ``controller``;
+    ``timing_columns``: the trace's wall-clock columns."""
+    s = world.settings
+    return {
+        "scenario": {"name": world.name, "path": scn.path, "sha256": sha256_of(scn.path)},
+        "map": {"path": scn.map.path, "sha256": sha256_of(scn.map.path)},
+        "rules": [{"path": p, "sha256": sha256_of(p), "constants": dict(c)} for p, c in world.rule_files],
+        "settings": {"H": s.H, "dt": s.dt, "r_near": s.r_near, "r": s.r, "D_safe": s.D_safe, "samples": s.samples,
+                     "time_limit": s.time_limit, "solver": s.solver, "stop_speed": s.stop_speed,
+                     "duration": s.duration, "seed": s.seed, "monitor": monitor,
+                     "controller": controller, "vehicle": dict(world.ego.vehicle)},
+        "seed": s.seed,
+        "versions": versions(),
+        "machine": {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
+                    "cpus": cpus()},
+        "timing_columns": list(timing_columns),
+        "map_lines": map_lines(world),
+    }
