@@ -101,3 +101,24 @@ def closed_loop(ctrl: HighLevelController, world: World, steps: int, x0=None, hi
         xs.append(x)
         tr.append(traffic)
     return np.array(xs), res, tr
+
+
+INSTANCE_EGO = "{start: {lane: middle, s: 20}, speed: %.2f, desired_speed: 15.0}"
+INSTANCE_ROUTE = "{start: {lane: middle, s: 20}, goal: {lane: middle, s: 900}, stop_at_goal: false}"
+INSTANCE_RULES = ("input float e\ninput float v\nno_collision = always[0:1] collision_free(5);\n"
+                  "on_road = always[0:1] ((e <= 4.5) and (e >= -4.5));\nspeed = always[0:1] (v <= 16);\n")
+"""The ego, route and rules of :func:`random_instance`."""
+
+
+def random_instance(tmp_path: Path, rng: np.random.Generator, i: int) -> World:
+    """A random small highway instance: the ego in the middle lane, one to three constant-velocity
+    vehicles, often a slow one just ahead (where the best plan changes lane)."""
+    n = int(rng.integers(1, 4))
+    parts = []
+    for j in range(n):
+        lane = ["middle", "left", "right"][int(rng.integers(0, 3))] if j else "middle"
+        s = float(rng.uniform(28, 34)) if j == 0 else float(rng.uniform(22, 45))
+        v = float(rng.uniform(0, 6)) if j == 0 else float(rng.uniform(5, 15))
+        parts.append(f"{{id: v{j}, behaviour: constant_velocity, start: {{lane: {lane}, s: {s:.2f}}}, speed: {v:.2f}}}")
+    return make_world(tmp_path, "highway.yaml", INSTANCE_EGO % float(rng.uniform(8, 15)), INSTANCE_ROUTE,
+                      "[" + ", ".join(parts) + "]", extra="controller: {r_near: 60}", name=f"inst{i}")

@@ -6,8 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mpc_worlds import controller, rules
-from test_paths_agree import RULES, _instance
+from mpc_worlds import INSTANCE_RULES, controller, random_instance, rules
 from twolevel.monitor.robustness import robustness
 
 
@@ -15,8 +14,8 @@ from twolevel.monitor.robustness import robustness
 @pytest.mark.parametrize("solver", ["modes", "highs"])
 def test_optimal_plans_satisfy_every_rule_by_the_monitor(tmp_path, seed: int, solver: str) -> None:
     rng = np.random.default_rng(seed)
-    w = _instance(tmp_path, rng, seed)
-    rs = rules(tmp_path, RULES)
+    w = random_instance(tmp_path, rng, seed)
+    rs = rules(tmp_path, INSTANCE_RULES)
     e = w.ego
     x0 = np.array([e.x, e.y, e.psi, e.v])
     res = controller(w, [rs], solver=solver, time_limit=None).solve(x0, 0.0, w.traffic0)

@@ -25,7 +25,7 @@ from twolevel.world.loader import load_scenario
 from twolevel.world.signals import StopMemory, update_stop_memory
 from twolevel.world.world import World, build_world
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 RULES = REPO / "rules"
 DT = 0.1
 

@@ -7,32 +7,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mpc_worlds import controller, make_world, rules
-
-EGO = "{start: {lane: middle, s: 20}, speed: %.2f, desired_speed: 15.0}"
-ROUTE = "{start: {lane: middle, s: 20}, goal: {lane: middle, s: 900}, stop_at_goal: false}"
-RULES = ("input float e\ninput float v\nno_collision = always[0:1] collision_free(5);\n"
-         "on_road = always[0:1] ((e <= 4.5) and (e >= -4.5));\nspeed = always[0:1] (v <= 16);\n")
-
-
-def _instance(tmp_path, rng: np.random.Generator, i: int):
-    n = int(rng.integers(1, 4))
-    parts = []
-    for j in range(n):
-        lane = ["middle", "left", "right"][int(rng.integers(0, 3))] if j else "middle"
-        s = float(rng.uniform(28, 34)) if j == 0 else float(rng.uniform(22, 45))
-        v = float(rng.uniform(0, 6)) if j == 0 else float(rng.uniform(5, 15))
-        parts.append(f"{{id: v{j}, behaviour: constant_velocity, start: {{lane: {lane}, s: {s:.2f}}}, speed: {v:.2f}}}")
-    w = make_world(tmp_path, "highway.yaml", EGO % float(rng.uniform(8, 15)), ROUTE, "[" + ", ".join(parts) + "]",
-                   extra="controller: {r_near: 60}", name=f"inst{i}")
-    return w
+from mpc_worlds import INSTANCE_EGO, INSTANCE_ROUTE, INSTANCE_RULES, controller, make_world, random_instance, rules
 
 
 @pytest.mark.parametrize("seed", range(20))
 def test_mode_search_to_completion_and_highs_agree(tmp_path, seed: int) -> None:
     rng = np.random.default_rng(seed)
-    w = _instance(tmp_path, rng, seed)
-    rs = rules(tmp_path, RULES)
+    w = random_instance(tmp_path, rng, seed)
+    rs = rules(tmp_path, INSTANCE_RULES)
     e = w.ego
     x0 = np.array([e.x, e.y, e.psi, e.v])
     # refresh=False: the same (minimal) encoding on both paths, so the models are identical
@@ -55,11 +37,11 @@ def test_mode_search_to_completion_and_highs_agree(tmp_path, seed: int) -> None:
 
 
 def test_the_only_good_plan_changes_lane(tmp_path) -> None:
-    w = make_world(tmp_path, "highway.yaml", EGO % 14.0, ROUTE,
+    w = make_world(tmp_path, "highway.yaml", INSTANCE_EGO % 14.0, INSTANCE_ROUTE,
                    "[{id: slow, behaviour: constant_velocity, start: {lane: middle, s: 36}, speed: 2.0},"
                    " {id: right, behaviour: constant_velocity, start: {lane: right, s: 22}, speed: 14.0}]",
                    extra="controller: {r_near: 60}", name="overtake")
-    rs = rules(tmp_path, RULES)
+    rs = rules(tmp_path, INSTANCE_RULES)
     e = w.ego
     x0 = np.array([e.x, e.y, e.psi, e.v])
     exact = controller(w, [rs], solver="modes", time_limit=None).solve(x0, 0.0, w.traffic0)
