@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass, field
-from typing import Callable, Mapping, Protocol, Sequence, TypeVar, Union
+from typing import Callable, Mapping, Protocol, Sequence, TypeVar, Union, runtime_checkable
 
 import numpy as np
 
@@ -168,6 +168,7 @@ class PreviousPlan:
         return cls(t, res.states, res.controls, res.mode)
 
 
+@runtime_checkable
 class Planner(Protocol):
     """A high-level planner (see the module docstring)."""
 

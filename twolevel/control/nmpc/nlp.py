@@ -30,6 +30,7 @@ Cost (the paper's, as :mod:`twolevel.control.high_level.problem`): Σ_k w_u‖u_
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -258,8 +259,6 @@ class NmpcProblem:
 
     def _attempt(self, w0: np.ndarray, p: np.ndarray, lam_g0: np.ndarray | None, lam_x0: np.ndarray | None,
                  lbfgs: bool) -> NlpSolution:
-        import time
-
         warm = lam_g0 is not None and lam_x0 is not None
         args: dict[str, Any] = {"x0": w0, "p": p, "lbx": self.lbx, "ubx": self.ubx, "lbg": self.lbg, "ubg": self.ubg}
         if warm:
