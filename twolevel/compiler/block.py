@@ -23,7 +23,7 @@ which implements :class:`RowSink`). A subclass gives:
   pieces that always hold are dropped, pieces that can never hold fail the requirement, big-M
   comes from the bounds. In stable mode at top level (``sink.stable`` and ``guard < 0``) it emits
   a structure that does not depend on the current values (redundant rows kept) and records it
-  with :meth:`RowSink.record`, so that :mod:`twolevel.control.template` can later rewrite the
+  with :meth:`RowSink.record`, so that :mod:`twolevel.control.high_level.template` can later rewrite the
   values in place;
 * :attr:`Block.kind` — its name in those records.
 """

@@ -6,7 +6,7 @@ Who makes it and who reads it:
   step → a tree), and by the built-ins it calls (:mod:`twolevel.compiler.collision`);
 * consumed by stage 2, :class:`twolevel.compiler.emitter.RowEmitter` (a tree → rows of the
   model), by the driver (:func:`twolevel.compiler.driver.encode`: bounds of the margin, rule
-  recovery) and, outside the compiler, by :mod:`twolevel.control.template`, which pattern-matches
+  recovery) and, outside the compiler, by :mod:`twolevel.control.high_level.template`, which pattern-matches
   the top-level trees of a stable encoding (``Encoding.trees``: a ``min`` of :class:`Block` s and
   at most one constant) to refresh a step model in place. A change of the node classes or of the
   invariants below must keep that consumer right.

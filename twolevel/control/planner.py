@@ -24,7 +24,6 @@ The simulation engine (:mod:`twolevel.sim.engine`) calls planners only through
 
 from __future__ import annotations
 
-import enum
 from dataclasses import dataclass, field
 from typing import Callable, Mapping, Protocol, Sequence, TypeVar, Union, runtime_checkable
 
@@ -32,6 +31,7 @@ import numpy as np
 
 from twolevel.control.codes import MIL512
 from twolevel.diagnostics import Diagnostic, Span
+from twolevel.milp.solution import ValueEnum
 from twolevel.models.params import BicycleParams
 from twolevel.world.signals import StopMemory, update_stop_memory
 from twolevel.world.traffic import TrafficState
@@ -44,8 +44,8 @@ DETAILED_STATES = 12
 """Components of the detailed four-wheel state (:data:`twolevel.models.fourwheel.NX`)."""
 
 
-class PlanStatus(str, enum.Enum):
-    """How a planning step ended."""
+class PlanStatus(ValueEnum):
+    """How a planning step ended (prints and compares as its value, like the solvers' statuses)."""
 
     OPTIMAL = "optimal"
     """A plan that satisfies every rule, optimal (certified within the gap)."""

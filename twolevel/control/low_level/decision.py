@@ -2,15 +2,16 @@
 
 from __future__ import annotations
 
-import enum
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from twolevel.milp.solution import ValueEnum
+
 __all__ = ["Action", "Choice", "Decision"]
 
 
-class Action(str, enum.Enum):
+class Action(ValueEnum):
     """Which control the low level applied (the trace's ``decision``)."""
 
     MPC = "mpc"
