@@ -15,13 +15,13 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from twolevel.monitor.errors import MonitorError
-from twolevel.monitor.robustness import DEFAULT_BUILTINS, Builtin, Evaluator
+from twolevel.monitor.robustness import DEFAULT_BUILTINS, ArrayEvaluator, Builtin
 from twolevel.stl import ast
 
 __all__ = ["BatchEvaluator", "robustness_batch", "evaluate_rules_batch"]
 
 
-class BatchEvaluator(Evaluator):
+class BatchEvaluator(ArrayEvaluator):
     """The oracle's evaluation over (K, T) arrays: only the set-up of the signals differs."""
 
     def __init__(self, signals: Mapping[str, np.ndarray], dt: float, consts: Mapping[str, float],

@@ -37,7 +37,7 @@ __all__ = [
     "robustness",
     "evaluate_rules",
     "TraceEvaluator",
-    "Evaluator",
+    "ArrayEvaluator",
 ]
 
 Builtin = Callable[..., np.ndarray]
@@ -78,7 +78,7 @@ def _trace_length(signals: Mapping[str, np.ndarray], rules: Mapping[str, np.ndar
     return n
 
 
-class Evaluator:
+class ArrayEvaluator:
     """One evaluation: signals, constants, rule results and a memo of evaluated nodes.
 
     Shape-generic: every value is an array of :attr:`shape` with time along the last axis, so
@@ -237,7 +237,7 @@ def robustness(
     robustness; ``builtins`` replaces :data:`DEFAULT_BUILTINS`. Raises :class:`MonitorError` for
     a missing name, unequal lengths or a bad ``dt``.
     """
-    ev = Evaluator(signals, dt, consts or {}, rules or {}, builtins)
+    ev = ArrayEvaluator(signals, dt, consts or {}, rules or {}, builtins)
     return np.asarray(ev.run(formula), dtype=np.float64).copy()
 
 
@@ -258,7 +258,7 @@ class TraceEvaluator:
         consts: Mapping[str, float] | None = None,
         builtins: Mapping[str, Builtin] | None = None,
     ) -> None:
-        self._ev = Evaluator(signals, dt, consts or {}, {}, builtins)
+        self._ev = ArrayEvaluator(signals, dt, consts or {}, {}, builtins)
 
     def evaluate(self, formula: ast.Node) -> np.ndarray:
         """The robustness of ``formula`` at every sample (names may be rules already added)."""
