@@ -44,7 +44,7 @@ from twolevel.control.high_level.problem import Assembled, StepRules, assemble
 from twolevel.control.high_level.robustness import plan_robustness
 from twolevel.control.high_level.rules import MpcRule, mpc_rules
 from twolevel.control.high_level.settings import MPCSettings
-from twolevel.control.high_level.solvers import solve_path
+from twolevel.control.high_level.solvers import Attempt, solve_path
 from twolevel.control.high_level.template import TemplateCache, refresh, template_of
 from twolevel.control.planner import (EgoState, PlanResult, PlanStatus, PreviousPlan, Snapshot, WorldState,
                                       planner_of_world, stop_memory_of)
@@ -116,7 +116,7 @@ class HighLevelController:
     # ------------------------------------------------------------------ the step's model
     def requirements(self, drop: frozenset[str] = frozenset(), P: int = 0) -> list[Requirement]:
         """Every rule not in ``drop``, required at trace index ``P`` (now)."""
-        return [Requirement(r.name, r.formula, (P,)) for r in self.rules if r.name not in drop]  # type: ignore[arg-type]
+        return [Requirement(r.name, r.formula, (P,)) for r in self.rules if r.name not in drop]
 
     def step_rules(self, past: Mapping[str, np.ndarray], P: int, drop: frozenset[str] = frozenset(),
                    recover_after: Mapping[str, int] | None = None) -> StepRules:
@@ -187,13 +187,11 @@ class HighLevelController:
         st = self.settings
         model = asm.model
         diags = list(asm.diagnostics)
-        att_status, cost, x, mode, qps, cert, gap, msg = (PlanStatus.INFEASIBLE, float("inf"), None,
-                                                          np.zeros(0, np.int64), 0, False, float("nan"), "")
+        att, msg = Attempt(), ""
         if any(d.is_error for d in asm.diagnostics):
             msg = "; ".join(d.message for d in asm.diagnostics if d.is_error)
         elif asm.encoding.infeasible:
-            msg = "a rule is violated by signals known at solve time"
-            cert = True
+            att, msg = Attempt(certified=True), "a rule is violated by signals known at solve time"
         else:
             t1 = time.perf_counter()
             backend = self.backend(asm)
@@ -201,19 +199,20 @@ class HighLevelController:
             left = None if st.time_limit is None else max(st.time_limit * 1e3 - (time.perf_counter() - t0) * 1e3, 1.0)
             att = self.path.solve(asm, step, backend, left, self._warm())
             tm.update(att.timings_ms)
-            att_status, cost, x, mode, qps, cert, gap = att.status, att.cost, att.x, att.mode, att.qps, att.certified, att.gap
-            if x is None:
-                msg = ("no mode satisfies every rule" if att_status is PlanStatus.INFEASIBLE
+            if att.x is None:
+                msg = ("no mode satisfies every rule" if att.status is PlanStatus.INFEASIBLE
                        else "no plan found within the time limit")
         tm["solve"] = sum(v for k, v in tm.items() if k not in _OWN_PHASES)
         tm["total"] = (time.perf_counter() - t0) * 1e3
         nb, nr, nc = model.n_binaries, model.n_rows, model.n_cols
-        if x is None:
+        mode = np.asarray(att.mode)
+        if att.x is None:
             states, controls, why = fallback_plan(self.carry.previous, step.x0, st.H, st.dt, self.params)
             diags.append(MIL515(f"t = {step.t:.2f} s: {msg}; fallback: {why}", Span(self.world.name)))
-            return PlanResult(PlanStatus.FALLBACK, float("nan"), controls, states, np.asarray(mode), nb, nr, nc, qps,
-                              cert, tm, {}, f"{att_status.value}: {msg}; fallback: {why}", gap, tuple(diags),
-                              st.solver)
+            return PlanResult(PlanStatus.FALLBACK, float("nan"), controls, states, mode, nb, nr, nc, att.qps,
+                              att.certified, tm, {}, f"{att.status.value}: {msg}; fallback: {why}", att.gap,
+                              tuple(diags), st.solver)
+        x = att.x
         states = np.vstack([step.x0[None], x[asm.layout.x]])
         controls = x[asm.layout.u]
         rob: dict[str, float] = {}
@@ -224,8 +223,8 @@ class HighLevelController:
         if asm.encoding.recovered:
             msg = "recovering: " + "; ".join(f"rule '{n}' violated now, required from k = {t2 - t}"
                                              for n, t, t2 in asm.encoding.recovered)
-        return PlanResult(att_status, float(cost), controls, states, np.asarray(mode), nb, nr, nc, qps, bool(cert), tm,
-                          rob, msg, float(gap), tuple(diags), st.solver)
+        return PlanResult(att.status, float(att.cost), controls, states, mode, nb, nr, nc, att.qps,
+                          bool(att.certified), tm, rob, msg, float(att.gap), tuple(diags), st.solver)
 
     def _recover_later(self, res: PlanResult, asm: Assembled, step: StepData, past: Mapping[str, np.ndarray], P: int,
                        tm: dict[str, float], t0: float) -> tuple[PlanResult, Assembled]:
