@@ -62,6 +62,14 @@ def _emit(text: str) -> None:
     sys.stdout.flush()
 
 
+def _emit_json(payload: object) -> None:
+    """One JSON document on stdout. Non-finite numbers are converted by the library (NaN as
+    null, ±inf as the strings "inf"/"-inf"); ``allow_nan=False`` guarantees strict JSON."""
+    import json
+
+    _emit(json.dumps(payload, allow_nan=False) + "\n")
+
+
 def _print_full(text: str) -> None:
     """Colour the severities of the ``full`` format on a terminal; plain otherwise."""
     if not sys.stdout.isatty():
@@ -161,8 +169,6 @@ def monitor(
     somewhere (first_violation_t), 2 when the rule file or the trace cannot be used or a rule
     could not be evaluated (e.g. it reads a column the trace lacks).
     """
-    import json
-
     from twolevel import pipeline
     from twolevel.diagnostics import render
 
@@ -178,7 +184,7 @@ def monitor(
     if not payload["rules"] and any(d.is_error for d in res.diagnostics):
         raise typer.Exit(EXIT_USAGE)  # nothing was evaluated: the findings above say why
     if output is MonitorFormat.json:
-        _emit(json.dumps(payload) + "\n")
+        _emit_json(payload)
     else:
         rows = payload["rules"]
         from rich.table import Table
@@ -224,8 +230,6 @@ def plan(
     Exit 0 with a plan, 1 when no plan satisfies the rules (the conflicting rules are named
     where they can be found), 2 on bad input.
     """
-    import json
-
     from twolevel.pipeline.planning import plan_scenario
 
     report_, diags = plan_scenario(scenario, solver=solver, at=at, trace=trace, emit=emit, time_limit=time_limit)
@@ -235,7 +239,7 @@ def plan(
     # a rule that cannot be encoded (MIL50x) or a model that could not be written (MIL514) is bad input
     bad_input = any(d.is_error and (d.code.startswith("MIL50") or d.code == "MIL514") for d in diags)
     if output is MonitorFormat.json:
-        _emit(json.dumps(report_.to_json()) + "\n")
+        _emit_json(report_.to_json())
     else:
         from rich.markup import escape
         from rich.table import Table

@@ -9,8 +9,13 @@ counterpart first (:func:`twolevel.milp.l1_surrogate.l1_surrogate`) or use
 
 from __future__ import annotations
 
+import contextlib
+import os
+import sys
+import threading
 import time
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 
@@ -26,6 +31,56 @@ def _highs():
     import highspy  # lazy: heavy
 
     return highspy
+
+
+_FD_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def _stdout_to_stderr() -> Iterator[None]:
+    """Send what C code writes to file descriptor 1 (stdout) to descriptor 2 (stderr) meanwhile.
+
+    highspy (1.16) prints its banner to stdout when a ``Highs`` object is built, before any
+    option can silence it; stdout carries the commands' JSON. A lock serialises the swap between
+    threads of this process (output of other threads meanwhile goes to stderr too)."""
+    with _FD_LOCK:
+        try:
+            sys.stdout.flush()
+            saved = os.dup(1)
+        except (OSError, ValueError):  # no stdout to protect (closed)
+            yield
+            return
+        try:
+            os.dup2(2, 1)
+        except OSError:  # no stderr either: drop the output
+            null = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(null, 1)
+            os.close(null)
+        try:
+            yield
+        finally:
+            _flush_c_stdio()
+            os.dup2(saved, 1)
+            os.close(saved)
+
+
+def _flush_c_stdio() -> None:
+    """Flush the C library's ``stdout`` buffer (what was written while fd 1 pointed elsewhere
+    must go there, not to the restored stdout)."""
+    try:
+        import ctypes
+
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError, TypeError):  # no C library to reach (not POSIX)
+        pass
+
+
+def _new_highs(highspy):  # type: ignore[no-untyped-def]
+    """A ``highspy.Highs`` with logging off, its banner kept off stdout."""
+    with _stdout_to_stderr():
+        h = highspy.Highs()
+        h.setOptionValue("output_flag", False)
+    return h
 
 
 def _status(h, highspy) -> Status:  # type: ignore[no-untyped-def]
@@ -71,8 +126,7 @@ def solve_highs(
     what matters); ``relax`` drops integrality (the LP relaxation)."""
     highspy = _highs()
     t0 = time.perf_counter()
-    h = highspy.Highs()
-    h.setOptionValue("output_flag", False)
+    h = _new_highs(highspy)
     h.setOptionValue("threads", threads)
     h.setOptionValue("mip_rel_gap", mip_gap)
     h.setOptionValue("random_seed", 0)
@@ -107,8 +161,7 @@ def write_model(model: MilpModel, path: str | Path) -> None:
     """Write the model's linear part as ``.mps`` or ``.lp`` (by the suffix) via HiGHS, with the
     model's column and row names."""
     highspy = _highs()
-    h = highspy.Highs()
-    h.setOptionValue("output_flag", False)
+    h = _new_highs(highspy)
     _pass(h, model, highspy)
     for j, name in enumerate(model.col_names):
         h.passColName(j, _safe(name))
