@@ -17,6 +17,7 @@ from __future__ import annotations
 import enum
 import json
 import os
+import re
 from dataclasses import dataclass
 from urllib.parse import quote
 from typing import Iterable, Mapping
@@ -35,6 +36,8 @@ __all__ = [
     "render_github",
     "render_sarif",
     "FORMATS",
+    "LINE_BREAK",
+    "source_lines",
 ]
 
 
@@ -155,34 +158,73 @@ def render_concise(diags: Iterable[Diagnostic]) -> str:
     return "\n".join(lines) + ("\n" if lines else "")
 
 
-def _source_line(sources: Mapping[str, str], file: str, line: int) -> str | None:
-    text = sources.get(file)
-    if text is None:
-        return None
-    lines = text.splitlines()
-    if 1 <= line <= len(lines):
-        src = lines[line - 1]
-        return src if len(src) <= 300 else src[:300] + "…"
-    return None
+LINE_BREAK = re.compile(r"\r\n|\r|\n")
+"""Where a line ends in a rule file (and in every file but YAML): LF, CRLF or a bare CR, as
+editors count lines. Form feeds, vertical tabs and the other characters :meth:`str.splitlines`
+also breaks at are not line breaks. The rule parser reads ``LINE_BREAK.sub("\\n", text)``, so its
+positions and the source lines :func:`render_full` shows agree."""
+
+_YAML_LINE_BREAK = re.compile(r"\r\n|[\r\n\x85\u2028\u2029]")
+"""Where PyYAML, which gives the positions of YAML findings, ends a line (YAML 1.1 also breaks
+at NEL, LS and PS)."""
+
+_SHOWN = 300
+"""Most characters of a source line shown under a finding [characters]."""
+
+
+def source_lines(text: str, file: str = "") -> list[str]:
+    """The lines of ``text`` as the reader of ``file`` counts them (:data:`LINE_BREAK`; YAML's
+    breaks for ``.yaml``/``.yml``). A text ending with a line break has an empty last line."""
+    breaks = _YAML_LINE_BREAK if file.endswith((".yaml", ".yml")) else LINE_BREAK
+    return breaks.split(text)
+
+
+def _visible(c: str) -> str:
+    """One character of a source line as shown on a terminal: control and invisible characters
+    become one visible stand-in each (so columns stay aligned and no escape sequence is sent)."""
+    if c.isprintable() or c == "\t":
+        return c
+    return chr(0x2400 + ord(c)) if ord(c) < 0x20 else "\u2421" if c == "\x7f" else "\ufffd"
+
+
+def _excerpt(src: str, start: int) -> tuple[str, int]:
+    """At most :data:`_SHOWN` characters of the source line ``src`` around 0-based column
+    ``start``, and where ``start`` lands in the excerpt."""
+    lo = 0
+    if len(src) > _SHOWN:
+        lo = max(0, min(start - _SHOWN // 3, len(src) - _SHOWN))
+    shown = "".join(map(_visible, src[lo:lo + _SHOWN]))
+    if lo + _SHOWN < len(src):
+        shown += "…"
+    if lo:
+        return "…" + shown, start - lo + 1
+    return shown, start
 
 
 def render_full(diags: Iterable[Diagnostic], sources: Mapping[str, str] | None = None) -> str:
-    """A multi-line block per finding with the source line and a caret under the span."""
+    """A multi-line block per finding with the source line and a caret under the span.
+
+    Each source is split into lines once (linear in the sources and the findings)."""
     sources = sources or {}
+    lines_of: dict[str, list[str] | None] = {}
     blocks = []
     for d in diags:
-        out = [f"{d.span.file}:{d.span.line}:{d.span.column}: {d.severity.value}[{d.code}]: {d.message}"]
-        src = _source_line(sources, d.span.file, d.span.line)
-        if src is not None:
-            gutter = f"{d.span.line:>5} | "
+        sp = d.span
+        out = [f"{sp.file}:{sp.line}:{sp.column}: {d.severity.value}[{d.code}]: {d.message}"]
+        if sp.file not in lines_of:
+            text = sources.get(sp.file)
+            lines_of[sp.file] = None if text is None else source_lines(text, sp.file)
+        lines = lines_of[sp.file]
+        if lines is not None and 1 <= sp.line <= len(lines):
+            raw = lines[sp.line - 1]
+            start = min(max(sp.column - 1, 0), len(raw))
+            src, at = _excerpt(raw, start)
+            gutter = f"{sp.line:>5} | "
             out.append(gutter + src)
-            start = max(d.span.column - 1, 0)
-            if d.span.end_line == d.span.line and d.span.end_column > d.span.column:
-                width = d.span.end_column - d.span.column
-            else:
-                width = 1
-            width = max(1, min(width, max(len(src) - start, 1)))
-            out.append(" " * (len(gutter) - 2) + "| " + " " * min(start, len(src)) + "^" * width)
+            width = sp.end_column - sp.column if sp.end_line == sp.line else 1
+            width = max(1, min(width, len(src) - at))
+            pad = "".join("\t" if c == "\t" else " " for c in src[:at])
+            out.append(" " * (len(gutter) - 2) + "| " + pad + "^" * width)
         if d.hint:
             out.append(f"      = hint: {d.hint}")
         blocks.append("\n".join(out))
@@ -204,15 +246,21 @@ def _gh_escape(text: str, prop: bool = False) -> str:
 
 
 def render_github(diags: Iterable[Diagnostic]) -> str:
-    """GitHub Actions workflow commands: ``::error file=…,line=…,col=…::CODE message``."""
+    """GitHub Actions workflow commands: ``::error file=…,line=…,col=…::CODE message``.
+
+    ``col``/``endColumn`` only for a span on one line: GitHub rejects columns on an annotation
+    whose ``endLine`` differs from its ``line``."""
     lines = []
     for d in diags:
+        sp = d.span
         level = {"error": "error", "warning": "warning"}.get(d.severity.value, "notice")
         msg = f"{d.code} {d.message}" + (f" (hint: {d.hint})" if d.hint else "")
+        if sp.end_line == sp.line:
+            where = f"line={sp.line},col={sp.column},endLine={sp.end_line},endColumn={sp.end_column}"
+        else:
+            where = f"line={sp.line},endLine={sp.end_line}"
         lines.append(
-            f"::{level} file={_gh_escape(d.span.file, True)},line={d.span.line},col={d.span.column},"
-            f"endLine={d.span.end_line},endColumn={d.span.end_column},title={_gh_escape(d.code, True)}::"
-            f"{_gh_escape(msg)}"
+            f"::{level} file={_gh_escape(sp.file, True)},{where},title={_gh_escape(d.code, True)}::{_gh_escape(msg)}"
         )
     return "\n".join(lines) + ("\n" if lines else "")
 

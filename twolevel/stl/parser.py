@@ -3,6 +3,7 @@
 :func:`parse` returns the :class:`~twolevel.stl.ast.RuleFile` (``None`` when the text has
 errors) and the diagnostics, never raises on bad input. The steps:
 
+0. line breaks (LF, CRLF, bare CR) become LF, so that every later step counts lines alike;
 1. a linear scan for unterminated ``/*`` comments and for parentheses nested deeper than
    :data:`MAX_NESTING` (before anything recursive sees the text);
 2. lexing with lark's basic lexer, continuing after an unexpected character;
@@ -25,7 +26,7 @@ import re
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from twolevel.diagnostics import Diagnostic, Span
+from twolevel.diagnostics import LINE_BREAK, Diagnostic, Span
 from twolevel.stl import codes
 from twolevel.stl.ast import (
     Abs,
@@ -564,7 +565,11 @@ class _Builder:
 
 
 def parse(text: str, file: str) -> tuple[RuleFile | None, list[Diagnostic]]:
-    """Parse rule-file ``text`` (``file`` names it in spans). ``None`` when any error was found."""
+    """Parse rule-file ``text`` (``file`` names it in spans). ``None`` when any error was found.
+
+    Lines end at LF, CRLF or a bare CR (:data:`twolevel.diagnostics.LINE_BREAK`): the text is
+    read with each of them as ``\\n``, so positions are those an editor shows."""
+    text = LINE_BREAK.sub("\n", text)
     pre = _scan_nesting(text, file)
     if pre is not None:
         return None, [pre]

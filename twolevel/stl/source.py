@@ -8,7 +8,7 @@ byte-order mark is dropped. Empty files are the parser's business (STL104).
 
 from __future__ import annotations
 
-from twolevel.diagnostics import Diagnostic, Span
+from twolevel.diagnostics import Diagnostic, Span, source_lines
 from twolevel.files import read_regular
 from twolevel.stl import codes
 
@@ -19,11 +19,10 @@ MAX_BYTES = 1 << 20
 
 
 def _byte_pos(data: bytes, offset: int) -> tuple[int, int]:
-    """1-based line and column (in characters) of byte ``offset``."""
-    line = data.count(b"\n", 0, offset) + 1
-    start = data.rfind(b"\n", 0, offset) + 1
-    col = len(data[start:offset].decode("utf-8", errors="replace")) + 1
-    return line, col
+    """1-based line (lines end at LF, CRLF or CR, as the parser counts them) and column (in
+    characters) of byte ``offset``."""
+    before = source_lines(data[:offset].decode("utf-8", errors="replace"))
+    return len(before), len(before[-1]) + 1
 
 
 def read_source(path: str, *, max_bytes: int = MAX_BYTES) -> tuple[str | None, list[Diagnostic]]:
