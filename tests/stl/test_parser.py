@@ -166,3 +166,13 @@ def test_recovery_reports_each_bad_statement() -> None:
 def test_number_out_of_range() -> None:
     rf, diags = parse("r = a < 1e999;", "t.stl")
     assert rf is None and diags[0].code == "STL110"
+
+
+@pytest.mark.parametrize("digits", ["\u0661\u0662", "\uff11\uff12", "1\u0662", "\u0967.5", "1e\u0663"])
+def test_numbers_are_ascii_digits_only(digits: str) -> None:
+    """Regression: digits of other scripts (Arabic-Indic, fullwidth, Devanagari) were read as
+    numbers, since the lexer's pattern used the Unicode-aware \\d."""
+    rf, diags = parse(f"input float a\nr = a > {digits};\n", "t.stl")
+    assert rf is None
+    bad = [d for d in diags if d.code == "STL102"]
+    assert bad and bad[0].span.line == 2 and "ASCII digits" in (bad[0].hint or "")

@@ -204,9 +204,9 @@ def _lex(text: str, file: str) -> tuple[list["Token"], list[Diagnostic]]:
             ch = text[bad]
             line, col = _offset_pos(text, bad)
             shown = ch if ch.isprintable() and not ch.isspace() else f"U+{ord(ch):04X}"
+            hint = _CHAR_HINTS.get(ch) or ("numbers are written with the ASCII digits 0-9" if ch.isdigit() else None)
             diags.append(
-                codes.STL102(f"unexpected character '{shown}'", Span(file, line, col, line, col + 1),
-                             hint=_CHAR_HINTS.get(ch))
+                codes.STL102(f"unexpected character '{shown}'", Span(file, line, col, line, col + 1), hint=hint)
             )
             if len(diags) >= MAX_LEX_ERRORS:
                 return tokens, diags
