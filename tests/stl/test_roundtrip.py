@@ -88,3 +88,25 @@ def test_parse_print_parse(fs: list) -> None:
 def test_terms_round_trip(t) -> None:
     back, diags = parse(f"r = {format_formula(t)} >= 0;", "t.stl")
     assert back is not None and back.rules[0].formula.left == t
+
+
+@pytest.mark.parametrize(
+    "formula",
+    [
+        " -> ".join(["a > 0"] * 70),  # right-assoc chain: clarity parentheses nested 69 deep
+        " - ".join(["a"] * 70) + " > 0",  # left chain RTAMT reads right-to-left: 68 deep
+        " / ".join(["a"] * 70) + " > 0",
+        "(" * 64 + "a > 0" + ")" * 64 + " -> b > 0 -> c > 0",  # parentheses at the limit already
+        " and ".join(f"(not p{k} > 0)" for k in range(60)) + " -> " + " -> ".join(["a > 0"] * 40),
+    ],
+)
+def test_deep_chains_print_as_text_the_parser_accepts(formula: str) -> None:
+    """Regression: chains of 67 or more '->' (and long '-' chains) printed with clarity
+    parentheses nested deeper than the parser accepts."""
+    decls = "input float a\ninput float b\ninput float c\n" + "".join(f"input float p{k}\n" for k in range(60))
+    rf, diags = parse(decls + f"r = {formula};\n", "deep.stl")
+    assert rf is not None, [d.message for d in diags]
+    text = format_file(rf)
+    back, diags = parse(text, "deep.stl")
+    assert back == rf, [d.message for d in diags]
+    assert format_file(back) == text

@@ -4,13 +4,17 @@
 literals are non-negative there: ``-3`` is ``Neg(Num(3))``). Parentheses are the minimum the
 grammar needs plus those that keep the text free of the style warnings (STL3xx): ``and`` inside
 ``or``, a prefix operator left of a binary operator, chained ``->``, and ``a - b + c`` chains
-(which RTAMT 0.4.10 reads right-to-left). Numbers print with :func:`repr` so floats round-trip;
-intervals in the unit they were written in when that is exact, else in seconds.
+(which RTAMT 0.4.10 reads right-to-left). Those clarity parentheses are left out of a formula
+they would nest deeper than the parser accepts (:data:`~twolevel.stl.parser.MAX_NESTING`, e.g. a
+chain of 70 ``->``): its text then needs no more nesting than the text it was parsed from, and
+may draw the style warnings. Numbers print with :func:`repr` so floats round-trip; intervals in
+the unit they were written in when that is exact, else in seconds.
 """
 
 from __future__ import annotations
 
 import math
+import re
 
 from twolevel.stl.ast import (
     Abs,
@@ -32,6 +36,7 @@ from twolevel.stl.ast import (
     Temporal,
     Var,
 )
+from twolevel.stl.parser import MAX_NESTING
 
 __all__ = ["format_formula", "format_term", "format_interval", "format_number", "format_rule",
            "format_declaration", "format_file"]
@@ -81,16 +86,17 @@ def _level(node: Node) -> int:
     return _ATOM
 
 
-def _fmt(node: Node, need: int, left_of_op: bool) -> str:
-    """``node`` as text, parenthesised when its level is below ``need`` or for clarity.
+def _fmt(node: Node, need: int, left_of_op: bool, clear: bool = True) -> str:
+    """``node`` as text, parenthesised when its level is below ``need`` or, with ``clear``, for
+    clarity.
 
     ``left_of_op``: the text will be followed by a binary operator (a prefix operator here would
-    read as covering it, STL304), so a prefix node gets parentheses.
+    read as covering it, STL304), so a prefix node gets parentheses (with ``clear``).
     """
     level = _level(node)
     prefix = isinstance(node, (Temporal, Not))
-    if level < need or (prefix and left_of_op):
-        return "(" + _fmt(node, 0, False) + ")"
+    if level < need or (prefix and left_of_op and clear):
+        return "(" + _fmt(node, 0, False, clear) + ")"
     if isinstance(node, Num):
         return format_number(node.value)
     if isinstance(node, Var):
@@ -98,35 +104,35 @@ def _fmt(node: Node, need: int, left_of_op: bool) -> str:
     if isinstance(node, BoolConst):
         return "true" if node.value else "false"
     if isinstance(node, Call):
-        return f"{node.name}({', '.join(_fmt(a, 0, False) for a in node.args)})"
+        return f"{node.name}({', '.join(_fmt(a, 0, False, clear) for a in node.args)})"
     if isinstance(node, Abs):
-        return f"abs({_fmt(node.operand, 0, False)})"
+        return f"abs({_fmt(node.operand, 0, False, clear)})"
     if isinstance(node, Edge):
-        return f"{node.op}({_fmt(node.operand, 0, False)})"
+        return f"{node.op}({_fmt(node.operand, 0, False, clear)})"
     if isinstance(node, Neg):
-        return "-" + _fmt(node.operand, _NEG, False)
+        return "-" + _fmt(node.operand, _NEG, False, clear)
     if isinstance(node, Arith):
         # Left operand: same level allowed, except chains RTAMT reads right-to-left (a-b+c, a/b*c).
-        lneed = level + 1 if isinstance(node.left, Arith) and node.left.op in "-/" and _level(node.left) == level else level
-        return f"{_fmt(node.left, lneed, False)} {node.op} {_fmt(node.right, level + 1, False)}"
+        rtl = clear and isinstance(node.left, Arith) and node.left.op in "-/" and _level(node.left) == level
+        return f"{_fmt(node.left, level + rtl, False, clear)} {node.op} {_fmt(node.right, level + 1, False, clear)}"
     if isinstance(node, Compare):
-        return f"{_fmt(node.left, _SUM, False)} {node.op} {_fmt(node.right, _SUM, False)}"
+        return f"{_fmt(node.left, _SUM, False, clear)} {node.op} {_fmt(node.right, _SUM, False, clear)}"
     if isinstance(node, Not):
-        return "not " + _fmt(node.operand, _CMP, False)
+        return "not " + _fmt(node.operand, _CMP, False, clear)
     if isinstance(node, Temporal):
         iv = "" if node.interval is None else format_interval(node.interval)
-        return f"{node.op}{iv} " + _fmt(node.operand, _CMP, False)
+        return f"{node.op}{iv} " + _fmt(node.operand, _CMP, False, clear)
     if isinstance(node, BinTemporal):
         iv = "" if node.interval is None else format_interval(node.interval)
-        return f"{_fmt(node.left, _UNTIL, True)} {node.op}{iv} {_fmt(node.right, _CMP, left_of_op)}"
+        return f"{_fmt(node.left, _UNTIL, True, clear)} {node.op}{iv} {_fmt(node.right, _CMP, left_of_op, clear)}"
     if isinstance(node, Binary):
         # and/or/xor/iff are left-associative, -> right-associative; a different connective as a
         # child is always parenthesised (clarity: STL301-303).
         def side(child: Node, base: int, left: bool) -> str:
             mixed = isinstance(child, Binary) and child.op != node.op
             chained = node.op == "implies" and isinstance(child, Binary) and child.op == "implies"
-            need_ = _ATOM if (mixed or chained) else base
-            return _fmt(child, need_, True if left else left_of_op)
+            need_ = _ATOM if clear and (mixed or chained) else base
+            return _fmt(child, need_, True if left else left_of_op, clear)
 
         if node.op == "implies":
             lhs, rhs = side(node.left, level + 1, True), side(node.right, level, False)
@@ -136,9 +142,23 @@ def _fmt(node: Node, need: int, left_of_op: bool) -> str:
     raise TypeError(f"cannot print {type(node).__name__}")
 
 
+_BRACKET = re.compile(r"[][()]")
+
+
+def _nesting(text: str) -> int:
+    """Most parentheses and brackets open at once in ``text`` (as the parser counts them)."""
+    depth = deepest = 0
+    for c in _BRACKET.findall(text):
+        depth += 1 if c in "([" else -1
+        deepest = max(deepest, depth)
+    return deepest
+
+
 def format_formula(f: Node) -> str:
-    """A formula (or term) as text that parses back to an equal node."""
-    return _fmt(f, 0, False)
+    """A formula (or term) as text that parses back to an equal node: with the clarity
+    parentheses, unless they would nest deeper than the parser accepts."""
+    text = _fmt(f, 0, False)
+    return text if _nesting(text) <= MAX_NESTING else _fmt(f, 0, False, clear=False)
 
 
 format_term = format_formula
