@@ -345,3 +345,23 @@ def test_missing_column_hint_is_computed_once_per_name(tmp_path: Path, monkeypat
     assert report.rules == () and [d.code for d in diags] == ["SIM602"] * 50
     assert calls[0] == 1
     assert "(80 more)" in (diags[0].hint or "")
+
+
+def test_undefined_robustness_is_a_finding_not_a_verdict(tmp_path: Path) -> None:
+    """Regression: inf - inf (an overflowing term, or an infinite signal) gave NaN robustness with
+    satisfied false and no violation time. Such a rule now gets no verdict (SIM607, with the
+    first time it is undefined); infinite robustness stays a value with the verdict of its sign."""
+    trace, _ = read_trace(_write(tmp_path, "t,v,d\n0,1,5\n0.1,2,inf\n0.2,3,-inf\n"))
+    assert trace is not None
+    rules = [
+        A.Rule(name="nan", formula=A.Compare(">=", A.Arith("-", A.Var("d"), A.Var("d")), A.Num(0.0))),
+        A.Rule(name="uses_nan", formula=A.Not(A.Var("nan"))),
+        A.Rule(name="huge", formula=A.Compare(">=", A.Arith("*", A.Var("v"), A.Num(1e308)), A.Num(0.0))),
+        A.Rule(name="far", formula=A.Compare("<=", A.Var("d"), A.Num(10.0))),
+    ]
+    report, diags = monitor_trace(rules, {}, trace)
+    assert [r.name for r in report.rules] == ["huge", "far"]
+    assert [(d.code, "t = 0.1 s" in d.message) for d in diags] == [("SIM607", True)]
+    huge, far = report.rules
+    assert huge.robustness == 1e308 and huge.satisfied and huge.first_violation_t is None
+    assert far.robustness == 5.0 and far.satisfied and far.first_violation_t == pytest.approx(0.1)

@@ -206,3 +206,41 @@ def test_binding_a_non_finite_constant_is_refused(tmp_path: Path, value: float) 
     assert ok is not None
     with pytest.raises(ValueError, match="finite"):
         ok.bind({"tol": value})
+
+
+def test_binding_a_constant_that_makes_a_term_overflow_is_refused(tmp_path: Path) -> None:
+    """A finite binding can still make arithmetic on constants overflow (STL223 at the term)."""
+    p = tmp_path / "r.stl"
+    p.write_text("input float v\nconst float k = 1\nr = always[0:1] (v <= k * 1e300);\n")
+    rs, diags = load_ruleset(str(p), {"k": 1e10})
+    assert rs is None and [(d.code, d.span.line, d.span.column) for d in diags] == [("STL223", 3, 23)]
+    ok, diags = load_ruleset(str(p), {"k": 1e8})
+    assert ok is not None and diags == []
+
+
+def test_did_you_mean_hints_cost_linear_work(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Regression: each undeclared name was compared with every name defined before it, so a
+    file with 4,000 undeclared names took 30 s (74,000: hours)."""
+    from twolevel.stl import typecheck as T
+
+    compared = [0]
+    real = T.difflib.get_close_matches
+
+    def counted(word, possibilities, *args, **kw):
+        possibilities = list(possibilities)
+        compared[0] += len(possibilities)
+        return real(word, possibilities, *args, **kw)
+
+    monkeypatch.setattr(T.difflib, "get_close_matches", counted)
+
+    def work(n: int) -> int:
+        compared[0] = 0
+        text = "input float speed\n" + "".join(f"r{k} = x{k} > 0;\n" for k in range(n)) + "q = sped > 0;\n"
+        found = check_source(text, "many.stl").diagnostics
+        assert sum(d.code == "STL201" for d in found) == n + 1
+        return compared[0]
+
+    assert work(100) > 0
+    assert work(3000) <= T.SUGGESTION_BUDGET
+    small = check_source("input float speed\nq = sped > 0;\n", "one.stl").diagnostics
+    assert [d.hint for d in small if d.code == "STL201"] == ["did you mean 'speed'?"]

@@ -448,6 +448,11 @@ def monitor_trace(
                 raise evaluator
             with np.errstate(all="ignore"):
                 rob = evaluator.evaluate(rule.formula)
+            undefined = np.flatnonzero(np.isnan(rob))
+            if undefined.size:
+                raise MonitorError(
+                    f"its robustness is undefined (NaN) from t = {float(trace.t[undefined[0]]):g} s: a term there is "
+                    "inf - inf or 0 * inf (it overflows, or reads an infinite signal)", rule.name)
             evaluator.add(rule.name, rob)
         except MonitorError as exc:
             diags.append(SIM607(f"rule '{rule.name}': {exc.message}", rule.name_span or rule.span or whole))

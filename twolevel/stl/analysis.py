@@ -29,6 +29,7 @@ from twolevel.stl.ast import (
     Num,
     Temporal,
     Var,
+    fold,
 )
 
 __all__ = [
@@ -42,6 +43,7 @@ __all__ = [
     "fold_constants",
     "fold_term",
     "substitute",
+    "overflowing_terms",
 ]
 
 
@@ -273,3 +275,32 @@ def fold_term(term: Node, values: Mapping[str, float] | None = None) -> Node:
     """A term with the named values substituted and its arithmetic folded (a :class:`Num` when
     it is constant)."""
     return _fold(term, values or {}, True)
+
+
+def overflowing_terms(formula: Node, values: Mapping[str, float] | None = None) -> list[Arith]:
+    """The arithmetic nodes of ``formula`` whose operands are constant (numbers, and the names
+    bound in ``values``) and finite but whose result is not, as ``1e308 * 10`` or ``c * c`` with
+    ``c = 1e300``: the innermost such nodes. A division by zero is not listed (the type checker
+    reports it on its own)."""
+    values = values or {}
+    found: list[Arith] = []
+
+    def value(node: Node, args: list[float | None]) -> float | None:
+        if isinstance(node, Num):
+            return node.value
+        if isinstance(node, Var):
+            return values.get(node.name)
+        if isinstance(node, Neg) and args[0] is not None:
+            return -args[0]
+        if isinstance(node, Abs) and args[0] is not None:
+            return abs(args[0])
+        if isinstance(node, Arith) and args[0] is not None and args[1] is not None:
+            v = _arith(node.op, args[0], args[1])
+            if v is not None and math.isfinite(v):
+                return v
+            if v is not None:
+                found.append(node)
+        return None
+
+    fold(formula, value)
+    return found

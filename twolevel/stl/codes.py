@@ -47,6 +47,7 @@ STL219 = Code("STL219", "unknown-binding", E, "A binding for a name that is not 
 STL220 = Code("STL220", "interval-too-long", E, "An interval longer than any trace can be (over 1e7 samples at dt, or 1e6 s).")
 STL221 = Code("STL221", "division-by-zero", E, "A division whose divisor is the constant 0: the term is infinite or NaN at every sample.")
 STL222 = Code("STL222", "non-finite-constant", E, "A constant whose value (declared or bound) is infinite or NaN.")
+STL223 = Code("STL223", "term-overflow", E, "Arithmetic on constants that overflows: the term is infinite or NaN at every sample.")
 
 # ----------------------------------------------------------------------------- STL3xx style & portability
 STL301 = Code("STL301", "and-or-mix", W, "'and' and 'or' mixed without parentheses; tools disagree on their precedence.")
@@ -58,7 +59,7 @@ STL305 = Code("STL305", "arith-chain", W, "'a - b + c' or 'a / b * c' without pa
 ALL: tuple[Code, ...] = (
     STL100, STL101, STL102, STL103, STL104, STL105, STL106, STL107, STL108, STL109, STL110,
     STL201, STL202, STL203, STL204, STL205, STL206, STL207, STL208, STL209, STL210,
-    STL211, STL212, STL213, STL214, STL215, STL216, STL217, STL218, STL219, STL220, STL221, STL222,
+    STL211, STL212, STL213, STL214, STL215, STL216, STL217, STL218, STL219, STL220, STL221, STL222, STL223,
     STL301, STL302, STL303, STL304, STL305,
 )
 

@@ -15,7 +15,7 @@ from twolevel.stl import codes
 from twolevel.stl.ast import RuleFile
 from twolevel.stl.parser import parse
 from twolevel.stl.source import read_source
-from twolevel.stl.typecheck import RuleSet, typecheck
+from twolevel.stl.typecheck import RuleSet, overflow_diagnostics, typecheck
 
 __all__ = ["LintResult", "check_source", "check_file", "load_ruleset"]
 
@@ -101,6 +101,11 @@ def load_ruleset(
         return None, [d for d in diags if d.code != codes.STL217.id]
     rs = rs.bind(consts)
     diags = [d for d in diags if d.code != codes.STL217.id]
+    if consts:  # the bound values may make a term overflow that the declared ones did not
+        values = {k: v for k, v in rs.consts.items() if v is not None}
+        over = [d for r in rs.rules for d in overflow_diagnostics(r.formula, values, path)]
+        if over:
+            return None, diags + over
     for name in rs.unbound:
         decl = res.rulefile.declaration(name) if res.rulefile else None
         span = decl.span if decl is not None and decl.span is not None else whole

@@ -13,14 +13,15 @@ the encoder would round the window to whole samples, silently changing what the 
 from __future__ import annotations
 
 import difflib
+import itertools
 import math
 from dataclasses import dataclass, field, fields, replace
 from types import MappingProxyType
-from typing import Callable, Iterable, Mapping
+from typing import Callable, Collection, Iterable, Mapping
 
 from twolevel.diagnostics import Diagnostic, Span
 from twolevel.stl import codes
-from twolevel.stl.analysis import fold_term, future_horizon, nonlinear_nodes, substitute
+from twolevel.stl.analysis import fold_term, future_horizon, nonlinear_nodes, overflowing_terms, substitute
 from twolevel.stl.ast import (
     Abs,
     Arith,
@@ -40,7 +41,7 @@ from twolevel.stl.ast import (
     Var,
 )
 
-__all__ = ["RuleSet", "typecheck", "BUILTIN_ARITY", "map_vars", "MAX_INTERVAL_SAMPLES", "MAX_INTERVAL_SECONDS"]
+__all__ = ["RuleSet", "typecheck", "overflow_diagnostics", "BUILTIN_ARITY", "map_vars", "MAX_INTERVAL_SAMPLES", "MAX_INTERVAL_SECONDS"]
 
 MAX_INTERVAL_SAMPLES = 10_000_000
 """Longest finite interval bound [samples of dt] (STL220): beyond it no trace is that long,
@@ -141,6 +142,12 @@ def _span(node: Node, fallback: str) -> Span:
     return node.span or Span.whole_file(fallback)
 
 
+SUGGESTION_BUDGET = 200_000
+"""Most name comparisons one file's "did you mean" hints may cost: a machine-written file with
+tens of thousands of unknown names is still checked in linear time (its later findings go
+without the hint)."""
+
+
 def _did_you_mean(name: str, candidates: Iterable[str]) -> str | None:
     close = difflib.get_close_matches(name, sorted(set(candidates)), n=1, cutoff=0.6)
     return f"did you mean '{close[0]}'?" if close else None
@@ -169,6 +176,21 @@ class _Checker:
         self.file = rf.path
         self.diags: list[Diagnostic] = []
         self.parens = rf.parenthesized
+        self.budget = SUGGESTION_BUDGET
+        self.suggested: dict[tuple[str, tuple[int, ...]], str | None] = {}
+
+    def did_you_mean(self, name: str, *groups: Collection[str]) -> str | None:
+        """A "did you mean" hint for ``name`` from the names in ``groups``: once per name and
+        source of candidates (the same, possibly growing, collections), within
+        :data:`SUGGESTION_BUDGET` comparisons per file (``None`` beyond it)."""
+        key = (name, tuple(id(g) for g in groups))
+        if key not in self.suggested:
+            cost = sum(len(g) for g in groups)
+            if cost > self.budget:
+                return None
+            self.budget -= cost
+            self.suggested[key] = _did_you_mean(name, itertools.chain(*groups))
+        return self.suggested[key]
 
     def bare(self, n: Node) -> bool:
         return n.span not in self.parens
@@ -294,6 +316,7 @@ def typecheck(
             outputs.append(d.name)
         else:
             consts[d.name] = _const_value(d, consts, ck)
+    values = {k: v for k, v in consts.items() if v is not None}
     # -- rules
     rule_lines = {r.name: r for r in rf.rules}
     defined: dict[str, float] = {}  # earlier rules -> future horizon [s]
@@ -323,12 +346,13 @@ def typecheck(
             elif isinstance(n, Call):
                 _check_call(n, ck)
             elif isinstance(n, Arith) and n.op == "/":
-                _check_divisor(n, consts, ck)
+                _check_divisor(n, values, ck)
             elif isinstance(n, Compare) and n.op in ("==", "!=="):
                 if not _integral(n, types):
                     diags.append(codes.STL213(
                         f"'{n.op}' compares real numbers exactly", _span(n, file),
                         hint="compare with a tolerance, e.g. abs(a - b) <= eps"))
+        ck.diags.extend(overflow_diagnostics(r.formula, values, file))
         for n in nonlinear_nodes(r.formula, frozenset(consts)):
             what = "a product of two signal expressions" if n.op == "*" else "a division by a signal expression"
             diags.append(codes.STL212(f"{what} is not linear: the rule cannot be encoded in the MPC", _span(n, file),
@@ -353,7 +377,7 @@ def typecheck(
                                       _span(d, file), hint="remove the declaration or use it in a rule"))
         if d.kind == "input" and provided_signals is not None and d.name not in provided_signals:
             listed = ", ".join(sorted(provided_signals)) or "(nothing)"
-            near = _did_you_mean(d.name, provided_signals)
+            near = ck.did_you_mean(d.name, provided_signals)
             diags.append(codes.STL216(f"the world does not provide signal '{d.name}'", _span(d, file),
                                       hint=(near + " " if near else "") + f"the world provides: {listed}"))
     rs = RuleSet(file, tuple(inputs), MappingProxyType(consts), tuple(rules), tuple(outputs), MappingProxyType(types))
@@ -407,8 +431,7 @@ def _check_names(r: Rule, ck: _Checker, inputs: list[str], consts: Mapping[str, 
         elif n.name in outputs:
             ck.diags.append(codes.STL201(f"'{n.name}' is declared as an output but no rule assigns it", sp))
         else:
-            known = list(inputs) + list(consts) + list(defined)
-            hint = _did_you_mean(n.name, known)
+            hint = ck.did_you_mean(n.name, inputs, consts, defined)
             if ck.provided is not None and n.name in ck.provided:
                 extra = f"the world provides '{n.name}': declare it with 'input float {n.name}'"
                 hint = f"{hint} or {extra}" if hint else extra
@@ -417,10 +440,17 @@ def _check_names(r: Rule, ck: _Checker, inputs: list[str], consts: Mapping[str, 
             ck.diags.append(codes.STL201(f"undeclared name '{n.name}'", sp, hint=hint))
 
 
-def _check_divisor(n: Arith, consts: Mapping[str, float | None], ck: _Checker) -> None:
-    """STL221 when the divisor of ``n`` folds to 0 (a literal, or constants with values)."""
-    known = {k: v for k, v in consts.items() if v is not None}
-    d = fold_term(n.right, known)
+def overflow_diagnostics(formula: Node, values: Mapping[str, float], file: str) -> list[Diagnostic]:
+    """STL223 for each innermost term of ``formula`` that overflows once the constants take
+    ``values`` (``1e308 * 10``): its robustness would be infinite or NaN at every sample."""
+    return [codes.STL223("this arithmetic on constants overflows: its value is not a finite number", _span(n, file),
+                         hint="keep constants and their products within ±1.8e308; rescale the units")
+            for n in overflowing_terms(formula, values)]
+
+
+def _check_divisor(n: Arith, values: Mapping[str, float], ck: _Checker) -> None:
+    """STL221 when the divisor of ``n`` folds to 0 (a literal, or constants with ``values``)."""
+    d = fold_term(n.right, values)
     if isinstance(d, Num) and d.value == 0:
         ck.diags.append(codes.STL221("division by zero: the term is infinite (or NaN) at every sample",
                                      _span(n.right, ck.file), hint="divide by a non-zero constant or a signal"))
@@ -429,7 +459,7 @@ def _check_divisor(n: Arith, consts: Mapping[str, float | None], ck: _Checker) -
 def _check_call(n: Call, ck: _Checker) -> None:
     sp = _span(n, ck.file)
     if n.name not in ck.builtins:
-        near = _did_you_mean(n.name, ck.builtins)
+        near = ck.did_you_mean(n.name, ck.builtins)
         known = ", ".join(sorted(ck.builtins)) or "none"
         ck.diags.append(codes.STL214(f"unknown function '{n.name}'", sp,
                                      hint=(near + " " if near else "") + f"built-in predicates: {known}"))
