@@ -267,17 +267,13 @@ def test_header_and_cell_positions_cost_linear_work_in_the_number_of_columns(
     from twolevel.monitor import tracefile
 
     work = [0]
+    real = tracefile._Record.cell_spans
 
-    def counted(name: str, cost) -> None:
-        real = getattr(tracefile, name, None)
-        if real is not None:
-            def wrapper(*args):
-                work[0] += cost(*args)
-                return real(*args)
-            monkeypatch.setattr(tracefile, name, wrapper)
+    def counted(self, path):  # one scan of the record's text
+        work[0] += sum(map(len, self.lines))
+        return real(self, path)
 
-    counted("_cell_column", lambda row, j: j)  # the old per-cell helper, if present
-    counted("_cell_columns", lambda row: len(row))
+    monkeypatch.setattr(tracefile._Record, "cell_spans", counted)
 
     def run(n: int) -> int:
         work[0] = 0
@@ -289,6 +285,7 @@ def test_header_and_cell_positions_cost_linear_work_in_the_number_of_columns(
         assert len(unusable) == n
         last = unusable[-1].span
         assert last.line == 2 and last.column == 3 + 2 * (n - 1)  # "0," then "x," per column
+        assert work[0] > 0
         return work[0]
 
     small, large = run(1000), run(4000)
@@ -365,3 +362,36 @@ def test_undefined_robustness_is_a_finding_not_a_verdict(tmp_path: Path) -> None
     huge, far = report.rules
     assert huge.robustness == 1e308 and huge.satisfied and huge.first_violation_t is None
     assert far.robustness == 5.0 and far.satisfied and far.first_violation_t == pytest.approx(0.1)
+
+
+@pytest.mark.parametrize("ending", ["\n", "\r\n", "\r"], ids=["LF", "CRLF", "CR"])
+def test_cell_positions_are_exact_with_spaces_quotes_and_line_breaks_in_cells(tmp_path: Path, ending: str) -> None:
+    """Regression: positions assumed unquoted cells without blanks, and a record holding a quoted
+    line break was reported at its last line instead of its first."""
+    text = ending.join([
+        't, "v", note',
+        '0.0, 1.5, "two\nlines"',
+        '0.1,  "oops" , ok',
+        '0.2, 2.5, x',
+    ]) + ending
+    path = _write(tmp_path, text)
+    report, diags = monitor_trace([A.Rule(name="r", formula=A.Compare(">", A.Var("v"), A.Num(0.0)))], {},
+                                  read_trace(path)[0])
+    [bad] = diags
+    assert (bad.code, bad.span.line, bad.span.column, bad.span.end_column) == ("SIM603", 4, 7, 13)
+    ragged = read_trace(_write(tmp_path, text.replace('lines"', 'lines", more'), "ragged.csv"))[1]
+    assert _codes(ragged) == [("SIM603", 2, 1)]  # the first line of the record, not its last
+    header = read_trace(_write(tmp_path, 't, "v" , "v"' + ending + "0,1,2" + ending, "dup.csv"))[1]
+    assert _codes(header) == [("SIM606", 1, 10)]
+
+
+def test_spaces_before_a_quoted_cell_are_blanks(tmp_path: Path) -> None:
+    """Regression: 'a, "1.5"' read the cell as the text ' "1.5"' (not a number), so quoting a
+    trace changed its verdicts."""
+    trace, diags = read_trace(_write(tmp_path, 't, "v"\n0, "1.5"\n0.1,  "-2" \n'))
+    assert diags == [] and trace is not None and trace.columns["v"].tolist() == [1.5, -2.0]
+
+
+def test_infinite_time_is_refused(tmp_path: Path) -> None:
+    trace, diags = read_trace(_write(tmp_path, "t,v\n0,1\n0.1,2\ninf,3\n"))
+    assert trace is None and _codes(diags) == [("SIM601", 4, 1)] and "finite" in diags[0].message

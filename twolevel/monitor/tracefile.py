@@ -17,13 +17,14 @@ values (``true``, empty windows) are written as the strings ``"inf"`` / ``"-inf"
 
 from __future__ import annotations
 
+import bisect
 import contextlib
 import csv
 import difflib
 import io
-import itertools
 import math
 import os
+import re
 from array import array
 from dataclasses import dataclass, field, replace
 from typing import Any, BinaryIO, Iterator, Mapping, Sequence
@@ -103,18 +104,79 @@ class MonitorReport:
 # --------------------------------------------------------------------------------- reading
 
 
-def _cell_columns(row: Sequence[str]) -> list[int]:
-    """1-based character column of every cell, exact for unquoted rows (prefix sums: O(len(row))
-    for the whole row, where one sum per cell was quadratic in the number of columns)."""
-    return list(itertools.accumulate((len(c) + 1 for c in row[:-1]), initial=1))
+class _Record:
+    """Where a CSV record lies in the file: the physical lines the reader took for it (a quoted
+    cell may hold line breaks) and the number of its first line."""
+
+    def __init__(self, text: Iterator[str]) -> None:
+        self._text = text
+        self.lines: list[str] = []
+        self.first = 1
+
+    def physical(self) -> Iterator[str]:
+        """The file's lines, each remembered for the record being read."""
+        for ln in self._text:
+            self.lines.append(ln)
+            yield ln
+
+    def next(self, line_num: int) -> None:
+        """Forget the record read; the next one starts after line ``line_num``."""
+        self.lines.clear()
+        self.first = line_num + 1
+
+    def cell_spans(self, path: str) -> list[Span]:
+        """The span of every cell of the record (blanks around it left out): one scan of its text,
+        as the ``csv`` module splits it (a quote opens a quoted part only at a cell's start)."""
+        text = "".join(self.lines)
+        n = len(text.rstrip("\r\n"))
+        breaks = [m.end() for m in _LINE_END.finditer(text, 0, n)]
+        bounds: list[tuple[int, int]] = []
+        i = 0
+        while True:
+            while i < n and text[i] in " \t":
+                i += 1
+            k = i
+            if k < n and text[k] == '"':
+                k += 1
+                while k < n and (text[k] != '"' or text.startswith('""', k)):
+                    k += 2 if text[k] == '"' else 1
+            k = text.find(",", k, n)
+            end = n if k < 0 else k
+            stop = end
+            while stop > i and text[stop - 1] in " \t":
+                stop -= 1
+            bounds.append((i, stop))
+            if k < 0:
+                break
+            i = k + 1
+
+        def at(offset: int) -> tuple[int, int]:
+            row = bisect.bisect_right(breaks, offset)
+            return self.first + row, offset - (breaks[row - 1] if row else 0) + 1
+
+        spans = []
+        for lo, hi in bounds:
+            (l0, c0), (l1, c1) = at(lo), at(max(hi, lo + 1) if lo < n else lo)
+            spans.append(Span(path, l0, c0, l1, c1))
+        return spans
+
+    def span(self, path: str) -> Span:
+        """The record's first line, whole."""
+        first = self.lines[0].rstrip("\r\n") if self.lines else ""
+        return Span(path, self.first, 1, self.first, len(first) + 1)
+
+
+_LINE_END = re.compile(r"\r\n|\r|\n")
 
 
 def _read_rows(
     path: str, diags: list[Diagnostic]
-) -> tuple[list[str], list[array], list[int], dict[str, Diagnostic]] | None:
+) -> tuple[list[str], list[array], list[int], dict[str, Diagnostic], Span] | None:
     """Stream the CSV: header names, one typed array per column, the file line of every row, and
     for each column holding a cell that is not a number (text, empty, NaN) the diagnostic of its
-    first such cell. ``inf``/``-inf`` are numbers (e.g. ``d_stop`` with no stop line near)."""
+    first such cell, and where the header is. ``inf``/``-inf`` are numbers (e.g. ``d_stop`` with no
+    stop line near). Lines end at LF, CRLF or CR; a record starts on the line after the previous
+    one ended (a quoted cell may hold line breaks)."""
     whole = Span.whole_file(path)
     fh, refusal = open_regular(path)
     if fh is None:
@@ -135,7 +197,7 @@ def _read_rows(
 
 def _read_open(
     path: str, fh: BinaryIO, diags: list[Diagnostic]
-) -> tuple[list[str], list[array], list[int], dict[str, Diagnostic]] | None:
+) -> tuple[list[str], list[array], list[int], dict[str, Diagnostic], Span] | None:
     whole = Span.whole_file(path)
     try:
         head = fh.read(8192)
@@ -157,27 +219,27 @@ def _read_open(
     line = 0
     try:
         with _text_of(fh) as text:
-            reader = csv.reader(text)
+            record = _Record(text)
+            reader = csv.reader(record.physical(), skipinitialspace=True)
             for row in reader:
-                line = reader.line_num
+                line = record.first  # where the record starts (a quoted cell may span lines)
                 if not row or all(not c.strip() for c in row):
+                    record.next(reader.line_num)
                     continue
                 if header is None:
                     header = [c.strip() for c in row]
+                    header_span = record.span(path)
                     cols = [array("d") for _ in header]
-                    if not _check_header(path, line, row, header, diags):
+                    if not _check_header(record.cell_spans(path), header, diags):
                         return None
+                    record.next(reader.line_num)
                     continue
                 if len(row) != len(header):
-                    diags.append(
-                        SIM603(
-                            f"row has {len(row)} cells but the header has {len(header)} columns",
-                            Span(path, line, 1, line, 1 + len(",".join(row))),
-                        )
-                    )
+                    diags.append(SIM603(f"row has {len(row)} cells but the header has {len(header)} columns",
+                                        record.span(path)))
                     errors += 1
                 else:
-                    where: list[int] | None = None  # cell columns, computed once per row if needed
+                    where: list[Span] | None = None  # cell spans, computed once per row if needed
                     for j, cell in enumerate(row):
                         text = cell.strip()
                         try:
@@ -189,15 +251,15 @@ def _read_open(
                             what = "is NaN" if math.isnan(value) else ""
                         if what and header[j] not in unusable:
                             if where is None:
-                                where = _cell_columns(row)
-                            col = where[j]
+                                where = record.cell_spans(path)
                             unusable[header[j]] = SIM603(
                                 f"cell in column '{header[j]}' {what}",
-                                Span(path, line, col, line, col + max(len(cell), 1)),
+                                where[j] if j < len(where) else record.span(path),
                                 hint="a signal read by a rule must be a number in every row (inf is allowed, NaN is not)",
                             )
                         cols[j].append(value)
                     lines.append(line)
+                record.next(reader.line_num)
                 if errors >= MAX_CELL_ERRORS:
                     diags.append(SIM603(f"stopped after {errors} bad rows", Span(path, line, 1)))
                     return None
@@ -219,7 +281,7 @@ def _read_open(
         return None
     if errors:
         return None
-    return header, cols, list(lines), unusable
+    return header, cols, list(lines), unusable, header_span
 
 
 @contextlib.contextmanager
@@ -243,13 +305,11 @@ def _first_non_utf8_line(fh: BinaryIO) -> int:
     return 1
 
 
-def _check_header(path: str, line: int, row: list[str], header: list[str], diags: list[Diagnostic]) -> bool:
+def _check_header(spans: list[Span], header: list[str], diags: list[Diagnostic]) -> bool:
     ok = True
     seen: set[str] = set()
-    columns = _cell_columns(row)
     for j, name in enumerate(header):
-        col = columns[j]
-        span = Span(path, line, col, line, col + max(len(row[j]), 1))
+        span = spans[min(j, len(spans) - 1)]
         if not name:
             diags.append(SIM606(f"column {j + 1} of the header has no name", span))
             ok = False
@@ -274,7 +334,7 @@ def read_trace(path: str | os.PathLike[str], *, dt: float | None = None) -> tupl
     read = _read_rows(path, diags)
     if read is None:
         return None, diags
-    header, cols, lines, unusable = read
+    header, cols, lines, unusable, header_span = read
     tcol = next((c for c in TIME_COLUMNS if c in header), None)
     if tcol is not None and tcol in unusable:
         diags.append(unusable[tcol])
@@ -285,7 +345,7 @@ def read_trace(path: str | os.PathLike[str], *, dt: float | None = None) -> tupl
         diags.append(
             SIM601(
                 "the trace has no time column",
-                Span(path, 1, 1, 1, 1 + len(",".join(header))),
+                header_span,
                 hint="name the time column 't' or 'time' (seconds), or give the period with --dt",
             )
         )
@@ -295,6 +355,12 @@ def read_trace(path: str | os.PathLike[str], *, dt: float | None = None) -> tupl
         return None, diags
     t = columns.pop(tcol) if tcol is not None else np.arange(n) * dt
     if tcol is not None:
+        infinite = np.flatnonzero(~np.isfinite(t))
+        if infinite.size:
+            k = int(infinite[0])
+            diags.append(SIM601(f"time {t[k]:g}: the time column must hold finite numbers of seconds",
+                                Span(path, lines[k], 1)))
+            return None, diags
         diffs = np.diff(t)
         bad = np.flatnonzero(diffs <= 0)
         if bad.size:
