@@ -11,8 +11,9 @@ costs about its numeric size in memory.
 
 JSON (:func:`to_json`): ``{"rules": [{"name", "robustness", "satisfied", "first_violation_t"}]}``
 (+ ``"series"`` per rule when asked). ``robustness`` is the value at the first sample; infinite
-values (``true``, empty windows) are written as the strings ``"inf"`` / ``"-inf"``, NaN as
-``null``; ``first_violation_t`` is in seconds from the time column, or ``null``.
+values (``true``, empty windows, overflows) are written as the strings ``"inf"`` / ``"-inf"``;
+``first_violation_t`` is in seconds from the time column, or ``null``. A rule whose robustness is
+NaN somewhere (``inf - inf``) gets no verdict but SIM607, so NaN (``null``) never reaches it.
 """
 
 from __future__ import annotations
