@@ -20,7 +20,7 @@ import random
 import traceback
 from dataclasses import dataclass, field
 
-__all__ = ["Outcome", "generate", "probe", "REFUSED", "ACCEPTED", "INTERNAL", "INCONSISTENT", "NAN_STATE"]
+__all__ = ["Outcome", "generate", "probe", "outside", "broken_verdict", "REFUSED", "ACCEPTED", "INTERNAL", "INCONSISTENT", "NAN_STATE"]
 
 #: Verdicts of :func:`probe`: "refused" (an error diagnostic) and "accepted" keep the invariant,
 #: the others break it.
@@ -193,16 +193,35 @@ def _positions(diags: object) -> list[tuple[str, int, int, int, int]]:
     return [(d.code, d.span.line, d.span.column, d.span.end_line, d.span.end_column) for d in diags]  # type: ignore[attr-defined]
 
 
-def _outside(text: str, diags: object) -> str | None:
-    """The first diagnostic whose span does not lie inside ``text`` (lines as the parser counts)."""
+def outside(text: str, diags: object, suffix: str = "") -> str | None:
+    """The first diagnostic (about a file ending in ``suffix``) whose span does not lie inside
+    ``text``, lines counted as the parser and the trace reader count them; ``None`` if none."""
     from twolevel.diagnostics import source_lines
 
     lines = source_lines(text)
     for d in diags:  # type: ignore[attr-defined]
         sp = d.span
+        if not sp.file.endswith(suffix):
+            continue
         for line, col in ((sp.line, sp.column), (sp.end_line, sp.end_column)):
             if not (1 <= line <= len(lines) and 1 <= col <= len(lines[line - 1]) + 1):
                 return f"{d.code} at {sp.line}:{sp.column}-{sp.end_line}:{sp.end_column} lies outside the text"
+    return None
+
+
+def broken_verdict(report: object) -> Outcome | None:
+    """The first rule of a monitor report (with series) whose verdict contradicts its robustness
+    (NaN given a verdict, ``satisfied`` not ``robustness >= 0``, a violation time without a
+    negative sample or the reverse); ``None`` if none."""
+    import numpy as np
+
+    for r in () if report is None else report.rules:  # type: ignore[attr-defined]
+        if math.isnan(r.robustness) or r.series is None or np.isnan(r.series).any():
+            return Outcome(NAN_STATE, f"rule {r.name}: NaN robustness with a verdict")
+        first = np.flatnonzero(r.series < 0)
+        if r.satisfied != (r.robustness >= 0) or (r.first_violation_t is None) != (first.size == 0):
+            return Outcome(INCONSISTENT, f"rule {r.name}: verdict {r.satisfied}/{r.first_violation_t} "
+                                         f"against robustness {r.robustness}")
     return None
 
 
@@ -227,9 +246,9 @@ def _probe(text: str, dt: float | None, horizon: int | None, seed: int) -> Outco
     verdict = REFUSED if any(d.is_error for d in diags) else ACCEPTED
     if result.rulefile is None and verdict == ACCEPTED:
         return Outcome(INCONSISTENT, "no rule file and no error", codes)
-    outside = _outside(text, diags)
-    if outside:
-        return Outcome(INCONSISTENT, outside, codes)
+    where = outside(text, diags)
+    if where:
+        return Outcome(INCONSISTENT, where, codes)
     for fmt in FORMATS:
         out = render(fmt, diags, sources={"fuzz.stl": text}, files_checked=1)
         if fmt in ("json", "sarif"):
@@ -262,12 +281,5 @@ def _monitor(ruleset: object, dt: float, rnd: random.Random) -> Outcome | None:
     columns = {name: np.array([rnd.choice(pool) if rnd.random() < 0.3 else rnd.uniform(-50, 50) for _ in range(n)])
                for name in (*SIGNALS, "min_gap")}
     trace = Trace("fuzz.csv", np.arange(n) * dt, columns, dt)
-    report, diags = monitor_trace(ruleset.rules, dict(ruleset.consts), trace, series=True)  # type: ignore[attr-defined]
-    for r in report.rules:
-        if math.isnan(r.robustness) or r.series is None or np.isnan(r.series).any():
-            return Outcome(NAN_STATE, f"rule {r.name}: NaN robustness with a verdict")
-        first = np.flatnonzero(r.series < 0)
-        if r.satisfied != (r.robustness >= 0) or (r.first_violation_t is None) != (first.size == 0):
-            return Outcome(INCONSISTENT, f"rule {r.name}: verdict {r.satisfied}/{r.first_violation_t} "
-                                         f"against robustness {r.robustness}")
-    return None
+    report, _ = monitor_trace(ruleset.rules, dict(ruleset.consts), trace, series=True)  # type: ignore[attr-defined]
+    return broken_verdict(report)

@@ -15,14 +15,13 @@ plain rendering, ``variants`` restyled ones and one mangled one, and returns an
 
 from __future__ import annotations
 
-import math
 import os
 import random
 import tempfile
 import traceback
 from dataclasses import dataclass
 
-from twolevel.fuzz.rules import ACCEPTED, INCONSISTENT, INTERNAL, NAN_STATE, REFUSED, Outcome
+from twolevel.fuzz.rules import ACCEPTED, INCONSISTENT, INTERNAL, REFUSED, Outcome, broken_verdict, outside
 
 __all__ = ["Case", "Style", "PLAIN", "generate", "restyle", "write", "mangle", "probe"]
 
@@ -173,35 +172,6 @@ def _verdicts(res: object) -> tuple[object, ...]:
     return rules, tuple(sorted(d.code for d in res.diagnostics)), res.violated  # type: ignore[attr-defined]
 
 
-def _consistent(res: object) -> Outcome | None:
-    import numpy as np
-
-    report = res.report  # type: ignore[attr-defined]
-    for r in () if report is None else report.rules:
-        if math.isnan(r.robustness) or np.isnan(r.series).any():
-            return Outcome(NAN_STATE, f"rule {r.name}: NaN robustness with a verdict")
-        first = np.flatnonzero(r.series < 0)
-        if r.satisfied != (r.robustness >= 0) or (r.first_violation_t is None) != (first.size == 0):
-            return Outcome(INCONSISTENT, f"rule {r.name}: verdict {r.satisfied}/{r.first_violation_t} "
-                                         f"against robustness {r.robustness}")
-    return None
-
-
-def _outside(data: bytes, res: object) -> str | None:
-    """The first finding about the trace whose span does not lie inside its text."""
-    from twolevel.diagnostics import source_lines
-
-    lines = source_lines(data.decode("utf-8-sig", errors="replace"))
-    for d in res.diagnostics:  # type: ignore[attr-defined]
-        sp = d.span
-        if not sp.file.endswith(".csv"):
-            continue
-        for line, col in ((sp.line, sp.column), (sp.end_line, sp.end_column)):
-            if not (1 <= line <= len(lines) and 1 <= col <= len(lines[line - 1]) + 1):
-                return f"{d.code} at {sp.line}:{sp.column}-{sp.end_line}:{sp.end_column} lies outside the file"
-    return None
-
-
 def probe(case: Case, *, variants: int = 3, seed: int = 0) -> Outcome:
     """Monitor ``case`` written plainly, in ``variants`` other styles and once mangled (drawn with
     ``seed``), and hold the results to the invariant (module docstring)."""
@@ -227,10 +197,10 @@ def _probe(case: Case, variants: int, rnd: random.Random) -> Outcome:
 
         plain = write(case, PLAIN, rnd)
         first = monitor(plain, "plain.csv")
-        where = _outside(plain, first)
+        where = outside(plain.decode("utf-8"), first.diagnostics, ".csv")  # type: ignore[attr-defined]
         if where:
             return Outcome(INCONSISTENT, where)
-        broken = _consistent(first)
+        broken = broken_verdict(first.report)  # type: ignore[attr-defined]
         if broken:
             return broken
         expected = _verdicts(first)
@@ -243,10 +213,10 @@ def _probe(case: Case, variants: int, rnd: random.Random) -> Outcome:
                                              f"{expected}\n{data!r}")
         mangled = mangle(plain, rnd)
         res = monitor(mangled, "mangled.csv")
-        where = _outside(mangled, res)
+        where = outside(mangled.decode("utf-8-sig", errors="replace"), res.diagnostics, ".csv")  # type: ignore[attr-defined]
         if where:
             return Outcome(INCONSISTENT, f"{where}: {mangled!r}")
-        broken = _consistent(res)
+        broken = broken_verdict(res.report)  # type: ignore[attr-defined]
         if broken:
             return broken
     codes = tuple(sorted(d.code for d in first.diagnostics))  # type: ignore[attr-defined]
