@@ -10,6 +10,7 @@ counterpart first (:func:`twolevel.milp.l1_surrogate.l1_surrogate`) or use
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import sys
 import threading
@@ -45,7 +46,8 @@ def _stdout_to_stderr() -> Iterator[None]:
     threads of this process (output of other threads meanwhile goes to stderr too)."""
     with _FD_LOCK:
         try:
-            sys.stdout.flush()
+            if sys.stdout is not None:
+                sys.stdout.flush()
             saved = os.dup(1)
         except (OSError, ValueError):  # no stdout to protect (closed)
             yield
@@ -64,15 +66,23 @@ def _stdout_to_stderr() -> Iterator[None]:
             os.close(saved)
 
 
-def _flush_c_stdio() -> None:
-    """Flush the C library's ``stdout`` buffer (what was written while fd 1 pointed elsewhere
-    must go there, not to the restored stdout)."""
+@functools.cache
+def _libc():  # type: ignore[no-untyped-def]
+    """The C library of this process (``None`` where it cannot be reached, e.g. on Windows)."""
     try:
         import ctypes
 
-        ctypes.CDLL(None).fflush(None)
-    except (OSError, AttributeError, TypeError):  # no C library to reach (not POSIX)
-        pass
+        return ctypes.CDLL(None)
+    except (OSError, TypeError):
+        return None
+
+
+def _flush_c_stdio() -> None:
+    """Flush the C library's ``stdout`` buffer (what was written while fd 1 pointed elsewhere
+    must go there, not to the restored stdout)."""
+    libc = _libc()
+    if libc is not None:
+        libc.fflush(None)
 
 
 def _new_highs(highspy):  # type: ignore[no-untyped-def]
