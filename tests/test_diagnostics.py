@@ -100,3 +100,13 @@ def test_sarif_uris_are_percent_encoded() -> None:
     doc = json.loads(render("sarif", [TST901("m", Span("./we,ird::na%me x.stl", 1, 1))]))
     uri = doc["runs"][0]["results"][0]["locations"][0]["physicalLocation"]["artifactLocation"]["uri"]
     assert uri == "./we%2Cird%3A%3Ana%25me%20x.stl"
+
+
+def test_github_annotations_leave_out_columns_for_spans_across_lines() -> None:
+    """Regression: GitHub rejects an annotation with columns whose endLine differs from its line."""
+    one = TST901("one line", Span("r.stl", 3, 5, 3, 9))
+    many = TST902("across lines", Span("r.stl", 3, 5, 6, 2))
+    lines = render("github", [one, many]).splitlines()
+    assert lines[0].startswith("::error file=r.stl,line=3,col=5,endLine=3,endColumn=9,title=TST901::")
+    assert lines[1].startswith("::warning file=r.stl,line=3,endLine=6,title=TST902::")
+    assert "col=" not in lines[1] and "endColumn=" not in lines[1]

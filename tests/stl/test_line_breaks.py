@@ -11,8 +11,7 @@ from pathlib import Path
 import pytest
 
 from twolevel import diagnostics
-from twolevel.diagnostics import Span, render, source_lines
-from twolevel.stl import codes
+from twolevel.diagnostics import render, source_lines
 from twolevel.stl.lint import check_file, check_source
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -130,11 +129,3 @@ def test_full_splits_each_source_once(monkeypatch: pytest.MonkeyPatch) -> None:
     assert split == [len(text)]
     assert out.count("error[STL201]") == 2000
 
-
-def test_github_annotations_leave_out_columns_for_spans_across_lines() -> None:
-    one = codes.STL201("one line", Span("r.stl", 3, 5, 3, 9))
-    many = codes.STL303("across lines", Span("r.stl", 3, 5, 6, 2))
-    lines = render("github", [one, many]).splitlines()
-    assert lines[0].startswith("::error file=r.stl,line=3,col=5,endLine=3,endColumn=9,title=STL201::")
-    assert lines[1].startswith("::warning file=r.stl,line=3,endLine=6,title=STL303::")
-    assert "col=" not in lines[1] and "endColumn=" not in lines[1]
