@@ -34,6 +34,10 @@ YML421 = Code("YML421", "population-crowded", W, "A population could not place a
 YML422 = Code("YML422", "not-a-mapping", E, "The document is not a mapping of keys to values.")
 YML423 = Code("YML423", "assumption-tighter", W,
               "An assumption about other road users tighter than its documented default (the guarantee covers less).")
+YML424 = Code("YML424", "bad-parameter-reference", E, "A ${...} value that is not a valid expression of the parameters.")
+YML425 = Code("YML425", "unknown-parameter", E, "A value given for a parameter the scenario does not declare.")
+YML426 = Code("YML426", "parameter-range-invalid", W, "Some value within a parameter's range makes the scenario invalid.")
+YML427 = Code("YML427", "goal-out-of-reach", W, "The goal cannot be reached within the run (or its deadline) at the speed limits.")
 
 __all__ = [name for name in dir() if name.startswith("YML")]
 

@@ -16,7 +16,7 @@ import re
 import typing
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable, Literal
+from typing import Any, Iterable, Literal, Mapping
 
 from pydantic import BaseModel, ValidationError
 
@@ -26,6 +26,7 @@ from twolevel.world.codes import (
     YML423,
 )
 from twolevel.world.document import Document, Path_, read_document
+from twolevel.world.parameters import check_variants, explain, substitute
 from twolevel.world.schema import MapFile, ScenarioFile, lane_length
 
 __all__ = ["Map", "Scenario", "RuleFile", "load_map", "load_scenario", "check_world_file", "file_kind"]
@@ -349,6 +350,14 @@ def _route_lanes(spec: ScenarioFile, succ: dict[str, list[str]]) -> list[str] | 
     return None
 
 
+def route_length(spec: ScenarioFile, lanes: list[str], lengths: dict[str, float]) -> float:
+    """Length [m] of the route from start to goal along ``lanes`` (pure Python)."""
+    r = spec.route
+    if len(lanes) == 1:
+        return r.goal.s - r.start.s
+    return lengths[lanes[0]] - r.start.s + sum(lengths[x] for x in lanes[1:-1]) + r.goal.s
+
+
 MIN_ROUTE_LENGTH = 1.0
 """Shortest route accepted [m] (and at least two reference points, one ``spacing`` apart)."""
 
@@ -357,10 +366,7 @@ def _check_route_length(spec: ScenarioFile, lanes: list[str], lengths: dict[str,
     """YML420 at the goal when the route from start to goal along ``lanes`` is too short to
     follow (a goal on the start: zero length, reference spacing 0, divisions by zero)."""
     r = spec.route
-    if len(lanes) == 1:
-        length = r.goal.s - r.start.s
-    else:
-        length = lengths[lanes[0]] - r.start.s + sum(lengths[x] for x in lanes[1:-1]) + r.goal.s
+    length = route_length(spec, lanes, lengths)
     least = max(MIN_ROUTE_LENGTH, r.spacing)
     if length >= least:
         return []
@@ -508,18 +514,26 @@ def load_map(path: str | os.PathLike[str]) -> tuple[Map | None, list[Diagnostic]
     return _load_map(Path(path), None)
 
 
-def load_scenario(path: str | os.PathLike[str]) -> tuple[Scenario | None, list[Diagnostic]]:
+def load_scenario(path: str | os.PathLike[str], parameters: Mapping[str, float] | None = None
+                  ) -> tuple[Scenario | None, list[Diagnostic]]:
     """Load a scenario, the scenarios it extends, and its map; locate its rule files.
 
-    Returns ``(scenario or None, diagnostics)``; the map's own diagnostics are included
-    (pointing into the map file). Never raises for bad input.
+    ``parameters`` give values to the scenario's declared parameters (the others take their
+    nominal values; :mod:`twolevel.world.parameters`). Returns ``(scenario or None,
+    diagnostics)``; the map's own diagnostics are included (pointing into the map file).
+    Never raises for bad input.
     """
     doc, diags = _read_kind(Path(path), "scenario", None)
     if doc is None:
         return None, diags
+    sub, sdiags = substitute(doc, parameters)
+    diags += sdiags
+    if any(d.is_error for d in sdiags):
+        return None, diags
+    doc = sub.document
     spec, vdiags = _validate(doc, ScenarioFile)
     if spec is None:
-        return None, diags + vdiags
+        return None, diags + explain(vdiags, sub)
     at_map = doc.locate(("map",), value=True)
     m, mdiags = _load_map(_resolve(spec.map, at_map), at_map)
     diags = diags + mdiags
@@ -532,7 +546,7 @@ def load_scenario(path: str | os.PathLike[str]) -> tuple[Scenario | None, list[D
         rules.append(RuleFile(str(target), tuple(sorted(ref.constants.items())), at))
     if m is None:
         return None, diags
-    diags += _check_scenario(spec, doc, m.spec)
+    diags += explain(_check_scenario(spec, doc, m.spec), sub) + check_variants(spec, doc)
     if any(d.is_error for d in diags):
         return None, diags
     return Scenario(spec, doc.path, m, tuple(rules)), diags
@@ -554,11 +568,15 @@ def check_world_file(path: str | os.PathLike[str]) -> list[Diagnostic]:
         return [YML410("neither a map nor a scenario: no 'roads' (map) or 'ego'/'route'/'map' (scenario)",
                        doc.locate(()), hint="add 'kind: map' or 'kind: scenario' at the top")]
     scenario, diags = load_scenario(path)
-    spec = scenario.spec if scenario else _validate(doc, ScenarioFile)[0]
+    spec = scenario.spec if scenario else _validate(substitute(doc)[0].document, ScenarioFile)[0]
     if spec is None:
         return diags
     rule_files = scenario.rules if scenario else ()
     diags += _lint_rules(rule_files, spec)
+    if scenario is not None:
+        from twolevel.world.lint import lint_scenario
+
+        diags += lint_scenario(scenario)
     return diags
 
 

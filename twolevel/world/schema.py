@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 __all__ = [
     "Arc", "Segment", "StartPose", "LaneSpec", "Road", "SpeedLimitSign", "StopSign", "LightCycle",
@@ -26,6 +26,7 @@ __all__ = [
     "IDMParams", "Waypoint", "Participant", "Population", "RuleRef", "ControllerSettings",
     "RunSettings", "ScenarioFile", "segment_length", "lane_length", "KMH",
     "UserBoundsSpec", "PedestrianBoundsSpec", "ResponseSpec", "AssumptionsSpec",
+    "GoalCriterion", "RoadCriterion", "Expect", "NormalDist", "Parameter", "Variant",
 ]
 
 KMH = 1.0 / 3.6  # [m/s] per km/h
@@ -386,6 +387,119 @@ class AssumptionsSpec(_Model):
         default_factory=dict, description="participant or population id → vehicle, cyclist or pedestrian (default vehicle)")
 
 
+# ------------------------------------------------- pass criteria, parameters and variants
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+
+
+def _switch(value: Any) -> Any:
+    """``true`` → the criterion with its defaults, ``false`` → off (None)."""
+    if value is True:
+        return {}
+    if value is False:
+        return None
+    return value
+
+
+class GoalCriterion(_Model):
+    """Reach the route's goal: stand still at it (a route that stops there) or pass it."""
+
+    by: Finite | None = Field(default=None, gt=0, le=36000, description="deadline [s]; default: within the run")
+
+
+class RoadCriterion(_Model):
+    """Stay inside the drivable area: every corner of the ego's box within the lanes."""
+
+    boundary: Literal["road", "lane"] = Field(
+        default="road", description="'road': any lane of the map; 'lane': the lanes of the route only")
+    tolerance: Finite = Field(default=0.5, ge=0, le=50, description="how far a corner may stray outside [m]")
+
+
+class Expect(_Model):
+    """Pass criteria of a run (:mod:`twolevel.verdict.criteria` judges them after the run).
+
+    Absent, a run must reach its goal, stay on the road, collide with nothing (at fault) and
+    keep every rule; ``goal: false``, ``on_road: false`` or ``no_collision: false`` turn one off.
+    The bounds are off unless given.
+    """
+
+    goal: GoalCriterion | None = Field(default_factory=GoalCriterion, description="reach the goal {by [s]}; false: not judged")
+    on_road: RoadCriterion | None = Field(
+        default_factory=RoadCriterion, description="stay inside {boundary: road|lane, tolerance [m]}; false: not judged")
+    no_collision: bool = Field(default=True, description="no collision the ego is at fault for")
+    rules: Literal["all"] | list[str] = Field(default="all", description="rules that must hold: all, or a list of names")
+    max_decel: Finite | None = Field(default=None, gt=0, le=100, description="peak deceleration [m/s²]")
+    max_jerk: Finite | None = Field(default=None, gt=0, le=1000, description="peak |jerk| [m/s³]")
+    max_lat_accel: Finite | None = Field(default=None, gt=0, le=100, description="peak |lateral acceleration| [m/s²]")
+    min_gap: Finite | None = Field(default=None, ge=-10, le=100, description="smallest box gap to any vehicle [m]")
+    max_stopped: Finite | None = Field(default=None, ge=0, le=36000, description="longest standstill before the goal [s]")
+
+    @field_validator("goal", "on_road", mode="before")
+    @classmethod
+    def _on_off(cls, value: Any) -> Any:
+        return _switch(value)
+
+
+class NormalDist(_Model):
+    """A normal distribution (truncated to the parameter's ``range`` when one is given)."""
+
+    mean: Finite = Field(description="mean")
+    std: Finite = Field(gt=0, description="standard deviation")
+
+
+class Parameter(_Model):
+    """A scenario parameter, referenced as ``${name}`` (or an expression of parameters) from any
+    numeric field: a ``range`` (uniform; grids take ``steps`` points), ``choices``, or a
+    ``normal`` distribution (truncated to ``range`` if both are given)."""
+
+    range: tuple[Finite, Finite] | None = Field(default=None, description="[low, high]")
+    choices: list[Finite] | None = Field(default=None, min_length=1, description="the values it may take")
+    normal: NormalDist | None = Field(default=None, description="{mean, std}; truncated to range if given")
+    steps: int = Field(default=5, ge=1, le=1000, description="grid points across the range (sweep --grid)")
+    default: Finite | None = Field(default=None, description="nominal value; default: middle / first choice / mean")
+    integer: bool = Field(default=False, description="round drawn values to whole numbers")
+
+    @model_validator(mode="after")
+    def _one_domain(self) -> "Parameter":
+        if self.choices is not None and (self.range is not None or self.normal is not None):
+            raise ValueError("a parameter has either 'choices' or a 'range' / 'normal' distribution, not both")
+        if self.choices is None and self.range is None and self.normal is None:
+            raise ValueError("a parameter needs 'range: [low, high]', 'choices: [...]' or 'normal: {mean, std}'")
+        if self.range is not None and self.range[0] > self.range[1]:
+            raise ValueError("'range' must be [low, high] with low <= high")
+        d = self.default
+        if d is not None and self.choices is not None and d not in self.choices:
+            raise ValueError(f"the default {d:g} is not one of the choices")
+        if d is not None and self.range is not None and not self.range[0] <= d <= self.range[1]:
+            raise ValueError(f"the default {d:g} is outside the range")
+        return self
+
+    def nominal(self) -> float:
+        """The value used when none is given: ``default``, else the middle of the range, the
+        first choice or the mean (clipped to the range)."""
+        if self.default is not None:
+            value = self.default
+        elif self.choices is not None:
+            value = self.choices[0]
+        elif self.normal is not None:
+            value = self.normal.mean
+            if self.range is not None:
+                value = min(max(value, self.range[0]), self.range[1])
+        else:
+            assert self.range is not None
+            value = 0.5 * (self.range[0] + self.range[1])
+        return float(round(value)) if self.integer else float(value)
+
+
+class Variant(_Model):
+    """A named case of the scenario for ``twolevel test``: parameter values, a seed, criteria."""
+
+    name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_.\-]+$", description="name (letters, digits, _ . -)")
+    parameters: dict[str, Finite] = Field(default_factory=dict, description="parameter name → value")
+    seed: int | None = Field(default=None, ge=0, description="seed of this case; default: the scenario's")
+    expect: Expect | None = Field(default=None, description="pass criteria of this case; default: the scenario's")
+
+
 class ScenarioFile(_Model):
     """A scenario: map, ego, route, other traffic, rules, controller and run settings."""
 
@@ -401,6 +515,17 @@ class ScenarioFile(_Model):
     controller: ControllerSettings = Field(default_factory=ControllerSettings, description="controller settings")
     run: RunSettings = Field(default_factory=RunSettings, description="run settings")
     assumptions: AssumptionsSpec | None = Field(default=None, description="assumptions about other road users (safety layer)")
+    expect: Expect = Field(default_factory=Expect, description="pass criteria of a run")
+    parameters: dict[str, Parameter] = Field(default_factory=dict, description="parameters referenced as ${name}")
+    variants: list[Variant] = Field(default_factory=list, description="named cases run by 'twolevel test'")
+
+    @field_validator("parameters")
+    @classmethod
+    def _parameter_names(cls, value: dict[str, Parameter]) -> dict[str, Parameter]:
+        bad = [k for k in value if not k.isidentifier()]
+        if bad:
+            raise ValueError(f"parameter names must be identifiers (letters, digits, _): {', '.join(bad)}")
+        return value
 
 
 # ------------------------------------------------ pure-Python lengths (no numpy: check path)

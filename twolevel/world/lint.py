@@ -1,0 +1,123 @@
+"""Warnings about valid scenarios that cannot do what they say (``twolevel check``).
+
+* YML426: a value within a parameter's range (its ends, every choice, a normal distribution's
+  mean ± 3 standard deviations) makes the scenario invalid — found by loading the scenario
+  there, one parameter at a time and, for a few parameters, at every corner of their box;
+* YML427: the goal is out of reach: at the highest speed the route allows (its speed limits,
+  capped by the ego's desired speed) the route takes longer than the run or the goal's
+  deadline (``expect.goal.by``).
+
+Imported by ``twolevel check``: pydantic, PyYAML and the standard library only.
+"""
+
+from __future__ import annotations
+
+import itertools
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from twolevel.diagnostics import Diagnostic
+from twolevel.world.codes import YML426, YML427
+from twolevel.world.schema import Parameter
+
+if TYPE_CHECKING:
+    from twolevel.world.loader import Scenario
+
+__all__ = ["lint_scenario", "extremes", "MAX_CORNERS"]
+
+MAX_CORNERS = 16
+"""Parameter boxes with at most this many corners are also checked at every corner."""
+
+
+def extremes(p: Parameter) -> tuple[float, ...]:
+    """The values a parameter is checked at: its range's ends, every choice, or a normal
+    distribution's mean ± 3 standard deviations (within its range)."""
+    if p.choices is not None:
+        values = tuple(p.choices)
+    elif p.range is not None:
+        values = p.range
+    else:
+        assert p.normal is not None
+        values = (p.normal.mean - 3 * p.normal.std, p.normal.mean + 3 * p.normal.std)
+    values = tuple(float(round(v)) if p.integer else float(v) for v in values)
+    return tuple(dict.fromkeys(values))
+
+
+def _first_error(path: str, values: dict[str, float]) -> Diagnostic | None:
+    from twolevel.world.loader import load_scenario
+
+    _, diags = load_scenario(path, values)
+    return next((d for d in diags if d.is_error), None)
+
+
+def _parameter_ranges(scn: "Scenario") -> list[Diagnostic]:
+    from twolevel.world.loader import _read_kind
+
+    params = scn.spec.parameters
+    if not params:
+        return []
+    doc, _ = _read_kind(Path(scn.path), "scenario", None)
+    if doc is None:
+        return []
+    out: list[Diagnostic] = []
+    for name, p in params.items():
+        for value in extremes(p):
+            err = _first_error(scn.path, {name: value})
+            if err is not None:
+                key = "choices" if p.choices is not None else "range" if p.range is not None else "normal"
+                out.append(YML426(f"with {name} = {value:g} the scenario is invalid: {err.span}: {err.message}",
+                                  doc.locate(("parameters", name, key), value=True),
+                                  hint="narrow the range, or move what the parameter places"))
+                break
+    box = [extremes(p) for p in params.values()]
+    n_corners = 1
+    for values in box:
+        n_corners *= len(values)
+    if out or len(params) < 2 or n_corners > MAX_CORNERS:
+        return out
+    for corner in itertools.product(*box):
+        values = dict(zip(params, corner))
+        err = _first_error(scn.path, values)
+        if err is not None:
+            shown = ", ".join(f"{k} = {v:g}" for k, v in values.items())
+            out.append(YML426(f"with {shown} the scenario is invalid: {err.span}: {err.message}",
+                              doc.locate(("parameters",)), hint="these parameters' ranges clash at this corner"))
+            break
+    return out
+
+
+def _goal_time(scn: "Scenario") -> list[Diagnostic]:
+    from twolevel.world.loader import _read_kind, _route_lanes, lane_lengths, route_length, successors
+
+    spec, m = scn.spec, scn.map.spec
+    if spec.expect.goal is None:
+        return []
+    lanes = _route_lanes(spec, successors(m))
+    if lanes is None:
+        return []
+    length = route_length(spec, lanes, lane_lengths(m))
+    own = {ln.id: ln.speed_limit for road in m.roads for ln in road.lane_specs()}
+    limits = [own.get(lane) or m.default_speed_limit for lane in lanes]
+    limits += [sign.value for sign in m.speed_limits if sign.lane in lanes]
+    fastest = max(limits)
+    if spec.ego.desired_speed is not None:
+        fastest = min(fastest, spec.ego.desired_speed)
+    fastest = max(fastest, spec.ego.speed)
+    least = length / fastest  # [s] a lower bound: no acceleration, no stop
+    by = spec.expect.goal.by
+    deadline, loc = (by, ("expect", "goal", "by")) if by is not None and by < spec.run.duration else \
+        (spec.run.duration, ("run", "duration"))
+    if least <= deadline:
+        return []
+    doc, _ = _read_kind(Path(scn.path), "scenario", None)
+    span = doc.locate(loc, value=True) if doc is not None else None
+    if span is None:
+        return []
+    return [YML427(f"the goal is out of reach: the route is {length:.0f} m long, at least {least:.1f} s at "
+                   f"{fastest:g} m/s, but {'the deadline' if loc[0] == 'expect' else 'the run'} is {deadline:g} s",
+                   span, hint="lengthen the run, move the goal closer, or set 'expect: {goal: false}'")]
+
+
+def lint_scenario(scn: "Scenario") -> list[Diagnostic]:
+    """Every warning of this module for a loaded scenario."""
+    return _parameter_ranges(scn) + _goal_time(scn)
