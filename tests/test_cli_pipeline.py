@@ -15,6 +15,12 @@ SCENARIO = str(ROOT / "scenarios" / "traffic_rules.yaml")
 runner = CliRunner()
 
 
+def _only_goal_missed(run_dir: Path) -> bool:
+    """A run cut short by --duration: every criterion met but reaching the goal (exit 1)."""
+    verdict = json.loads((run_dir / "run.json").read_text())["verdict"]
+    return [c["name"] for c in verdict["criteria"] if not c["passed"]] == ["goal"]
+
+
 def test_plan_json_has_the_documented_shape() -> None:
     res = runner.invoke(app, ["plan", SCENARIO, "--format", "json"])
     assert res.exit_code == 0, res.output
@@ -42,7 +48,7 @@ def test_plan_bad_input_exits_2_without_traceback(tmp_path: Path) -> None:
 def test_simulate_then_monitor_and_report_the_run(tmp_path: Path) -> None:
     run_dir = tmp_path / "run"
     res = runner.invoke(app, ["simulate", SCENARIO, "--out", str(run_dir), "--duration", "2", "--no-progress"])
-    assert res.exit_code == 0, res.output
+    assert res.exit_code == 1 and _only_goal_missed(run_dir), res.output
     assert "control step median" in res.stdout
     meta = json.loads((run_dir / "run.json").read_text())
     assert meta["status"] == "complete" and meta["rows"] == 20
@@ -68,7 +74,7 @@ def test_simulate_with_the_nmpc_baseline(tmp_path: Path, model: str) -> None:
     args = ["simulate", str(ROOT / "scenarios" / "comparison.yaml"), "--out", str(run_dir), "--controller", "nmpc",
             "--nmpc-model", model, "--no-monitor", "--duration", "0.5", "--no-progress"]
     res = runner.invoke(app, args)
-    assert res.exit_code == 0, res.output
+    assert res.exit_code == 1 and _only_goal_missed(run_dir), res.output
     meta = json.loads((run_dir / "run.json").read_text())
     assert meta["settings"]["controller"] == ("nmpc" if model == "kinematic" else "nmpc-fourwheel")
     assert set(meta["summary"]["decisions"]) == {"nmpc"}
@@ -90,6 +96,7 @@ def test_plan_reports_bad_input_not_a_rule_conflict(tmp_path: Path) -> None:
 
 def test_plan_at_nan_is_refused(tmp_path: Path) -> None:
     run_dir = tmp_path / "run"
-    assert runner.invoke(app, ["simulate", SCENARIO, "--out", str(run_dir), "--duration", "0.5", "--no-progress"]).exit_code == 0
+    assert runner.invoke(app, ["simulate", SCENARIO, "--out", str(run_dir), "--duration", "0.5", "--no-progress"]).exit_code == 1
+    assert _only_goal_missed(run_dir)
     res = runner.invoke(app, ["plan", SCENARIO, "--trace", str(run_dir / "trace.csv"), "--at", "nan"])
     assert res.exit_code == 2 and "MIL513" in res.stderr

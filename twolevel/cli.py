@@ -313,8 +313,9 @@ def simulate(
     """Run SCENARIO in closed loop (detailed vehicle model as the plant) and write a run
     directory: trace.csv (one row per step, written as it goes), run.json, frames.jsonl.
 
-    Exit 0 when the run completed without collision or rule violation, 1 when it collided or
-    violated a rule, 2 on bad input or an interrupted/crashed run.
+    The run is judged against the scenario's pass criteria (expect:; by default: goal reached,
+    on the road, no collision at fault, every rule holds). Exit 0 when every criterion is met,
+    1 when one is not, 2 on bad input or an interrupted/crashed run.
     """
     from pathlib import Path
 
@@ -341,15 +342,44 @@ def simulate(
                                                duration=duration, progress=on_step)
     else:
         summary, diags = simulate_scenario(scenario, run_dir, monitor=not no_monitor, controller=ctrl, seed=seed, duration=duration)
-    _print_diagnostics(diags)
     if summary is None:
+        _print_diagnostics(diags)
         raise typer.Exit(EXIT_USAGE)
-    _console().print(_table(f"{scenario} → {summary.run_dir}", _summary_rows(summary)))
-    _console().print(f"trace: {Path(summary.run_dir) / 'trace.csv'}   report: twolevel report {summary.run_dir}", markup=False)
-    if summary.status != "complete":
+    from twolevel.verdict.judge import judge_run
+
+    verdict, more = judge_run(summary.run_dir, scenario)
+    _print_diagnostics(diags + more)
+    console = _console()
+    console.print(_table(f"{scenario} → {summary.run_dir}", _summary_rows(summary)))
+    if verdict is not None:
+        console.print(_criteria_table(verdict))
+    console.print(f"trace: {Path(summary.run_dir) / 'trace.csv'}   report: twolevel report {summary.run_dir}", markup=False)
+    if summary.status != "complete" or verdict is None:
         raise typer.Exit(EXIT_USAGE)
-    bad = summary.collisions or any(v.steps for v in summary.violations)
-    raise typer.Exit(EXIT_FAIL if bad else EXIT_OK)
+    raise typer.Exit(EXIT_OK if verdict.passed else EXIT_FAIL)
+
+
+def _criteria_table(verdict):  # noqa: ANN001, ANN202 - Verdict and rich are imported lazily
+    """The verdict as a table: each criterion with its measured value, bound and margin."""
+    from rich.markup import escape
+    from rich.table import Table
+
+    def num(v: float | None, unit: str) -> str:
+        if v is None:
+            return "-"
+        return (f"{v:.4g} {unit}".strip()) if v == v and abs(v) != float("inf") else str(v)
+
+    title = "PASS: every criterion met" if verdict.passed else \
+        f"FAIL: {len(verdict.failed)} of {len(verdict.criteria)} criteria not met" + ("" if verdict.status == "complete" else f" (run {verdict.status})")
+    table = Table(title=title, title_justify="left")
+    for col, justify in (("criterion", "left"), ("verdict", "center"), ("measured", "right"), ("bound", "right"),
+                         ("margin", "right")):
+        table.add_column(col, justify=justify, no_wrap=True)
+    table.add_column("detail", justify="left", ratio=1)
+    for c in verdict.criteria:
+        table.add_row(escape(c.name), "pass" if c.passed else "[bold red]FAIL[/]", escape(num(c.measured, c.unit)),
+                      escape(num(c.bound, c.unit)), escape(num(c.margin, "")), escape(c.detail))
+    return table
 
 
 def _table(title: str, rows: list[tuple[str, str]]):  # noqa: ANN202 - rich is imported lazily

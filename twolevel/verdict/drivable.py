@@ -1,0 +1,94 @@
+"""The drivable area: the union of a map's lanes, each its centre line widened to its width.
+
+:func:`outside` gives, for points, how far they are outside it (> 0) or how deep inside the
+lane that holds them best (≤ 0); :func:`box_outside` does it for the ego's box over a whole
+trace (its worst corner at each step). "Left the map" is the extreme case: the reference point
+itself is outside every lane. Lanes are capsules: past a lane's end the distance is to its
+end point, unless the lane continues into another. Vectorised over points and lane intervals, in blocks.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from twolevel.world.geometry import LaneSet, box_corners
+
+__all__ = ["outside", "box_outside", "lane_edges"]
+
+_BLOCK = 256  # points per block: keeps the (points × intervals) arrays small
+
+
+def _dead_ends(lanes: LaneSet, extend: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per interval, the lowest and highest projection parameter allowed: [0, 1], stretched by
+    ``extend`` [m] at the start of a lane nothing leads into and the end of one leading nowhere."""
+    seg = lanes.seg_lane
+    n = len(seg)
+    low, high = np.zeros(n), np.ones(n)
+    if extend <= 0 or n == 0:
+        return low, high
+    d = np.diff(lanes.points, axis=0)
+    length = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-12)
+    entered = {j for lane in lanes.lanes for j in lane.successors}
+    prev = np.concatenate(([-1], seg[:-1]))
+    nxt = np.concatenate((seg[1:], [-1]))
+    for k in np.flatnonzero((seg >= 0) & (prev != seg)):
+        if int(seg[k]) not in entered:
+            low[k] = -extend / length[k]
+    for k in np.flatnonzero((seg >= 0) & (nxt != seg)):
+        if not lanes.lanes[int(seg[k])].successors:
+            high[k] = 1.0 + extend / length[k]
+    return low, high
+
+
+def outside(lanes: LaneSet, points: np.ndarray, only: Sequence[int] | None = None, extend: float = 0.0) -> np.ndarray:
+    """Distance [m] of each point (M, 2) outside the drivable area (> 0), or minus its depth
+    inside the lane that holds it most (≤ 0). ``only``: lane indices making up the area
+    (default: every lane of the map). ``extend`` [m]: the map's dead ends (a lane start nothing
+    leads into, a lane end leading nowhere) reach this far on, straight."""
+    pts = np.asarray(points, dtype=float).reshape(-1, 2)
+    a = lanes.points[:-1]
+    d = lanes.points[1:] - a
+    l2 = np.einsum("kj,kj->k", d, d)
+    low, high = _dead_ends(lanes, extend)
+    keep = (lanes.seg_lane >= 0) & (l2 > 0)
+    if only is not None:
+        keep &= np.isin(lanes.seg_lane, np.asarray(list(only), dtype=int))
+    a, d, l2, low, high = a[keep], d[keep], l2[keep], low[keep], high[keep]
+    half = 0.5 * lanes.width[lanes.seg_lane[keep]]
+    out = np.full(len(pts), np.inf)
+    if a.size == 0:
+        return out
+    for lo in range(0, len(pts), _BLOCK):
+        rel = pts[lo:lo + _BLOCK, None, :] - a[None]
+        t = np.clip(np.einsum("mkj,kj->mk", rel, d) / l2, low, high)
+        diff = rel - t[..., None] * d[None]
+        dist = np.sqrt(np.einsum("mkj,mkj->mk", diff, diff))
+        out[lo:lo + _BLOCK] = (dist - half[None]).min(axis=1)
+    return out
+
+
+def box_outside(lanes: LaneSet, x: np.ndarray, y: np.ndarray, psi: np.ndarray, length: float, width: float,
+                only: Sequence[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """For each sample of a trajectory, how far the box's worst corner is outside the drivable
+    area [m] (≤ 0: every corner inside), and the reference point's distance outside every lane. At the
+    map's dead ends the area reaches half the box's length on: a box is off the end of the map
+    once its reference point is."""
+    x, y, psi = (np.asarray(c, dtype=float) for c in (x, y, psi))
+    centre = np.stack([x, y], axis=-1)
+    corners = box_corners(centre, psi, np.full(x.shape, length), np.full(x.shape, width))  # (N, 4, 2)
+    worst = outside(lanes, corners.reshape(-1, 2), only, 0.5 * length).reshape(-1, 4).max(axis=1)
+    return worst, outside(lanes, centre)
+
+
+def lane_edges(lanes: LaneSet, spacing: float = 2.0) -> list[list[list[float]]]:
+    """Both edges of every lane as polylines [[x, y], …] sampled about every ``spacing`` [m]
+    (for figures: the boundary of the drivable area is where an edge borders no other lane)."""
+    out = []
+    for lane in lanes.lanes:
+        n = max(2, int(np.ceil(lane.length / spacing)) + 1)
+        s = np.linspace(lane.s[0], lane.s[-1], n)
+        for side in (-0.5, 0.5):
+            out.append(np.round(lane.position(s, side * lane.width), 2).tolist())
+    return out

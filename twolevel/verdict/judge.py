@@ -1,0 +1,63 @@
+"""Judging a run directory: its recorded trace and summary against its scenario's criteria.
+
+:func:`judge_run` loads the scenario the run names (or the one given), builds its world (the
+lanes, the route, the ego's box), judges :mod:`twolevel.verdict.criteria` and records the
+verdict in ``run.json`` (key ``verdict``, beside the engine's ``summary``) with the lane edges
+the report draws (key ``road_edges``), atomically. Nothing of the run is re-simulated.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Mapping
+
+from twolevel.diagnostics import Diagnostic, Span
+from twolevel.verdict.criteria import Verdict, judge
+
+__all__ = ["judge_run", "recorded_verdict", "VERDICT_KEY", "EDGES_KEY"]
+
+VERDICT_KEY = "verdict"
+EDGES_KEY = "road_edges"
+
+
+def judge_run(run_dir: str | os.PathLike[str], scenario: str | os.PathLike[str] | None = None, *,
+              parameters: Mapping[str, float] | None = None, write: bool = True
+              ) -> tuple[Verdict | None, list[Diagnostic]]:
+    """Judge the run in ``run_dir`` against ``scenario`` (default: the path ``run.json``
+    records) with ``parameters`` (default: nominal); with ``write``, record the verdict in
+    ``run.json``. Returns ``(verdict or None, diagnostics)``; None when the run or the scenario
+    cannot be read. Never raises for bad input."""
+    from twolevel.atomic import write_json_atomic
+    from twolevel.verdict.codes import SIM620
+    from twolevel.sim.trace import RUN_FILE, read_run
+    from twolevel.verdict.drivable import lane_edges
+    from twolevel.world.loader import load_scenario
+    from twolevel.world.world import build_world
+
+    run = read_run(run_dir)
+    path = scenario if scenario is not None else (run.meta.get("scenario") or {}).get("path")
+    where = Span.whole_file(str(Path(run_dir) / RUN_FILE))
+    if path is None or not run.meta:
+        return None, [SIM620(f"cannot judge {run_dir}: {'; '.join(run.problems) or 'no scenario recorded'}", where)]
+    scn, diags = load_scenario(path, parameters)
+    if scn is None:
+        return None, diags
+    world = build_world(scn)
+    meta = dict(run.meta)
+    verdict = judge(scn.spec.expect, world, run.columns, meta.get("summary") or {}, str(meta.get("status", "unknown")),
+                    meta.get("settings"))
+    if write:
+        meta[VERDICT_KEY] = verdict.to_json()
+        meta[EDGES_KEY] = lane_edges(world.lanes)
+        try:
+            write_json_atomic(Path(run_dir) / RUN_FILE, meta)
+        except OSError as exc:
+            diags.append(SIM620(f"cannot record the verdict in {RUN_FILE}: {exc}", where))
+    return verdict, diags
+
+
+def recorded_verdict(meta: Mapping[str, object]) -> Verdict | None:
+    """The verdict ``run.json`` holds (None if the run was never judged)."""
+    raw = meta.get(VERDICT_KEY)
+    return Verdict.from_json(raw) if isinstance(raw, Mapping) else None
