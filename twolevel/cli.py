@@ -427,6 +427,126 @@ def report(
     raise typer.Exit(EXIT_OK)
 
 
+def _campaign_executor(scheduler: Optional[str], jobs: Optional[int]):  # noqa: ANN202
+    from twolevel.campaign.executor import ExecutorError, make_executor
+
+    try:
+        return make_executor(scheduler, jobs)
+    except ExecutorError as exc:
+        _console(stderr=True).print(f"error: {exc}", markup=False)
+        raise typer.Exit(EXIT_USAGE)
+
+
+_OUTCOME_STYLE = {"passed": "green", "failed": "bold red", "error": "bold magenta", "running": "cyan", "queued": "dim"}
+
+
+def _suite_table(rows: dict, shown: int = 40):  # noqa: ANN001, ANN202 - rich is imported lazily
+    """The live table of a suite: each case's state, time and failed criteria (the last ones)."""
+    from rich.markup import escape
+    from rich.table import Table
+
+    done = sum(1 for r in rows.values() if r[0] not in ("queued", "running"))
+    table = Table(title=f"{done}/{len(rows)} cases done", title_justify="left")
+    for col in ("case", "outcome", "time [s]", "failed criteria"):
+        table.add_column(col)
+    items = list(rows.items())
+    active = [kv for kv in items if kv[1][0] == "running"] + [kv for kv in items if kv[1][0] not in ("queued", "running")]
+    for case_id, (state, secs, failed) in active[-shown:]:
+        table.add_row(escape(case_id), f"[{_OUTCOME_STYLE.get(state, '')}]{state}[/]", secs, escape(failed))
+    return table
+
+
+@app.command("test")
+def test_scenarios(
+    paths: List[str] = typer.Argument(..., metavar="PATH...", help="Scenario files or folders holding them."),
+    keyword: Optional[str] = typer.Option(None, "-k", metavar="EXPRESSION", help="Only cases whose id matches: words as substrings, and/or/not, parentheses."),
+    failed_first: bool = typer.Option(False, "--failed-first", help="Run the cases that failed last time first."),
+    jobs: Optional[int] = typer.Option(None, "--jobs", "-j", min=1, help="Worker processes (default: one per core)."),
+    scheduler: Optional[str] = typer.Option(None, "--scheduler", metavar="tcp://HOST:PORT", help="Run on a Dask cluster (pip install 'twolevel[dask]')."),
+    seed: Optional[int] = typer.Option(None, "--seed", min=0, help="Seed of every case (default: each scenario's or variant's)."),
+    runs_dir: str = typer.Option("runs/test", "--runs-dir", metavar="DIR", help="Where run directories go (kept for cases that did not pass)."),
+    keep_passed: bool = typer.Option(False, "--keep-passed", help="Keep the run directories of passing cases too."),
+    junit: Optional[str] = typer.Option(None, "--junit-xml", metavar="FILE", help="Write a JUnit XML report."),
+    json_out: Optional[str] = typer.Option(None, "--json", metavar="FILE", help="Write the results as JSON."),
+    github: Optional[bool] = typer.Option(None, "--github/--no-github", help="Print GitHub annotations (default: under GitHub Actions)."),
+    cache_file: str = typer.Option(".twolevel_cache/test.json", "--cache-file", metavar="FILE", help="Where the last failures are remembered."),
+) -> None:
+    """Run every scenario below PATH... (and every variant they list) as a suite, in parallel,
+    each judged by its criteria (expect:).
+
+    Exit 0 when every case passed, 1 when some case failed or could not be run, 2 on a usage
+    error (no scenario found, a bad -k expression, no Dask scheduler there).
+    """
+    import json
+
+    from twolevel.atomic import write_json_atomic, write_text_atomic
+    from twolevel.campaign import suite as S
+
+    cases, diags = S.discover(paths)
+    _print_diagnostics(diags)
+    if any(d.is_error for d in diags):
+        raise typer.Exit(EXIT_USAGE)
+    try:
+        cases = S.select(cases, keyword)
+    except S.KeywordError as exc:
+        raise typer.BadParameter(str(exc), param_hint="-k") from None
+    if seed is not None:
+        from dataclasses import replace
+
+        cases = [replace(c, seed=seed) for c in cases]
+    if failed_first:
+        cases = S.order_failed_first(cases, S.read_cache(cache_file))
+    console = _console()
+    if not cases:
+        console.print(f"no case matches -k {keyword!r}", markup=False)
+        raise typer.Exit(EXIT_USAGE)
+    rows = {c.id: ("queued", "", "") for c in cases}
+    live_view = sys.stdout.isatty()
+
+    def started(case) -> None:  # noqa: ANN001
+        rows[case.id] = ("running", "", "")
+
+    def finished(r) -> None:  # noqa: ANN001
+        rows[r.case.id] = (r.outcome, f"{r.wall_s:.1f}", ", ".join(r.failed) or (r.messages[0].splitlines()[0][:80] if r.messages else ""))
+        if live_view:
+            live.update(_suite_table(rows))
+        else:
+            _emit(f"{r.outcome.upper():7s} {r.case.id} ({r.wall_s:.1f} s){': ' + ', '.join(r.failed) if r.failed else ''}\n")
+
+    with _campaign_executor(scheduler, jobs) as executor:
+        if live_view:
+            from rich.live import Live
+
+            with Live(_suite_table(rows), console=console, refresh_per_second=4) as live:
+                result = S.run_cases(cases, executor, runs_dir, keep_passed=keep_passed, on_start=started, on_result=finished)
+        else:
+            result = S.run_cases(cases, executor, runs_dir, keep_passed=keep_passed, on_result=finished)
+    S.write_cache(cache_file, result.results)
+    bad = [r for r in result.results if not r.passed]
+    if bad:
+        from rich.markup import escape
+        from rich.table import Table
+
+        table = Table(title="cases that did not pass", title_justify="left")
+        for col in ("case", "outcome", "why", "run directory"):
+            table.add_column(col)
+        for r in bad:
+            why = "; ".join(f"{c['name']}: {c['detail']}" for c in (r.verdict or {}).get("criteria", []) if not c["passed"])
+            table.add_row(escape(r.case.id), r.outcome, escape(why or (r.messages[0].splitlines()[0] if r.messages else r.status)),
+                          escape(r.run_dir or "-"))
+        console.print(table)
+    n = result.counts
+    console.print(f"{len(result.results)} cases: {n['passed']} passed, {n['failed']} failed, {n['error']} errors "
+                  f"in {result.wall_s:.1f} s", markup=False)
+    if junit:
+        write_text_atomic(junit, S.junit_xml(result))
+    if json_out:
+        write_json_atomic(json_out, S.suite_json(result))
+    if github if github is not None else os.environ.get("GITHUB_ACTIONS") == "true":
+        _emit(S.annotations(result))
+    raise typer.Exit(EXIT_OK if result.passed else EXIT_FAIL)
+
+
 def main() -> None:
     """Console-script entry point: never let a Python traceback reach the user."""
     try:
