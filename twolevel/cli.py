@@ -547,6 +547,156 @@ def test_scenarios(
     raise typer.Exit(EXIT_OK if result.passed else EXIT_FAIL)
 
 
+def _campaign_scenario(scenario: str):  # noqa: ANN202
+    """The scenario of a sweep or search, loaded with nominal values (exit 2 when it is not valid)."""
+    from twolevel.world.loader import load_scenario
+
+    scn, diags = load_scenario(scenario)
+    _print_diagnostics(diags)
+    if scn is None:
+        raise typer.Exit(EXIT_USAGE)
+    if not scn.spec.parameters:
+        _console(stderr=True).print(f"error: {scenario} declares no parameters (add 'parameters:' and refer to them as ${{name}})",
+                                    markup=False)
+        raise typer.Exit(EXIT_USAGE)
+    return scn
+
+
+def _batch_runner(executor, runs_dir: str, keep_passed: bool):  # noqa: ANN001, ANN202
+    from twolevel.campaign.suite import run_cases
+
+    def run(cases):  # noqa: ANN001, ANN202
+        return list(run_cases(cases, executor, runs_dir, keep_passed=keep_passed, frames=False).results)
+
+    return run
+
+
+@app.command()
+def sweep(
+    scenario: str = typer.Argument(..., metavar="SCENARIO.yaml", help="A scenario that declares parameters."),
+    grid: bool = typer.Option(False, "--grid", help="Every combination of the parameters' grid values (steps, choices)."),
+    samples: Optional[int] = typer.Option(None, "--samples", "-n", min=1, help="This many random draws from the parameters' distributions."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Seed of the random draws."),
+    out: Optional[str] = typer.Option(None, "--out", "-o", metavar="DIR", help="Campaign folder (default: runs/sweep-<scenario>)."),
+    jobs: Optional[int] = typer.Option(None, "--jobs", "-j", min=1, help="Worker processes (default: one per core)."),
+    scheduler: Optional[str] = typer.Option(None, "--scheduler", metavar="tcp://HOST:PORT", help="Run on a Dask cluster."),
+    keep_passed: bool = typer.Option(False, "--keep-passed", help="Keep the run directories of passing runs too."),
+    objective: str = typer.Option("verdict", "--objective", help="Robustness tabulated per run: rule:NAME, at_fault, criterion:NAME, verdict."),
+) -> None:
+    """Run SCENARIO over a grid or random samples of its parameters; write the results table
+    (results.csv, results.json, results.parquet with pyarrow) and report.html into the folder.
+
+    Exit 0 when every run passed its criteria, 1 when some did not, 2 on a usage error.
+    """
+    from pathlib import Path
+
+    from twolevel.campaign import sampling
+    from twolevel.campaign.falsify import ObjectiveError, parse_objective
+    from twolevel.campaign.report import write_campaign_report
+    from twolevel.campaign.case import Case
+    from twolevel.campaign.results import table_rows, write_table
+    from twolevel.verdict.judge import criteria_of
+
+    if grid == (samples is not None):
+        raise typer.BadParameter("give exactly one of --grid or --samples N", param_hint="--grid/--samples")
+    scn = _campaign_scenario(scenario)
+    params = scn.spec.parameters
+    try:
+        obj = parse_objective(objective, criteria_of(scn))
+        points = sampling.grid(params) if grid else sampling.random_points(params, samples or 0, seed)
+    except (ObjectiveError, ValueError) as exc:
+        raise typer.BadParameter(str(exc)) from None
+    folder = Path(out or Path("runs") / f"sweep-{Path(scenario).stem}")
+    cases = [Case(f"#{i + 1:04d}", scenario, p) for i, p in enumerate(points)]
+    console = _console()
+    with _campaign_executor(scheduler, jobs) as executor:
+        results = _batch_runner(executor, str(folder / "runs"), keep_passed)(cases)
+    rows = table_rows(results, folder, objective=obj.of)
+    files = write_table(rows, folder)
+    report = write_campaign_report(folder, rows, params, obj.text, title=f"sweep of {scenario}")
+    failed = sum(1 for r in results if not r.passed)
+    console.print(f"{len(results)} runs: {len(results) - failed} passed, {failed} did not; "
+                  f"table: {files[0]}; report: {report}", markup=False)
+    raise typer.Exit(EXIT_OK if failed == 0 else EXIT_FAIL)
+
+
+@app.command()
+def falsify(
+    scenario: str = typer.Argument(..., metavar="SCENARIO.yaml", help="A scenario that declares parameters."),
+    objective: str = typer.Option("verdict", "--objective", help="Robustness to minimise: rule:NAME, at_fault, criterion:NAME, verdict (the smallest margin)."),
+    budget: int = typer.Option(100, "--budget", min=1, help="Most simulations to run."),
+    optimizer: str = typer.Option("cma", "--optimizer", help="cma (CMA-ES; cross-entropy without the cma package), ce, random."),
+    batch: Optional[int] = typer.Option(None, "--batch", min=2, help="Runs per generation (default: the optimiser's)."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Seed of the search."),
+    out: Optional[str] = typer.Option(None, "--out", "-o", metavar="DIR", help="Campaign folder (default: runs/falsify-<scenario>)."),
+    jobs: Optional[int] = typer.Option(None, "--jobs", "-j", min=1, help="Worker processes (default: one per core)."),
+    scheduler: Optional[str] = typer.Option(None, "--scheduler", metavar="tcp://HOST:PORT", help="Run on a Dask cluster."),
+) -> None:
+    """Search SCENARIO's parameters for a run whose OBJECTIVE robustness is negative; stop at
+    the first counterexample or after BUDGET simulations. A counterexample is written as a
+    standalone scenario (counterexample.yaml) with its run (counterexample/); the results table
+    and report.html go into the folder too.
+
+    Exit 1 when a counterexample was found, 0 when none was within the budget, 2 on a usage error.
+    """
+    import json
+    import shutil
+    from pathlib import Path
+
+    from twolevel.atomic import write_json_atomic
+    from twolevel.campaign import falsify as F
+    from twolevel.campaign.case import write_concrete
+    from twolevel.campaign.report import write_campaign_report
+    from twolevel.campaign.results import table_rows, write_table
+    from twolevel.verdict.judge import criteria_of
+
+    if optimizer not in F.OPTIMIZERS:
+        raise typer.BadParameter(f"choose one of {', '.join(F.OPTIMIZERS)}", param_hint="--optimizer")
+    scn = _campaign_scenario(scenario)
+    try:
+        obj = F.parse_objective(objective, criteria_of(scn))
+    except F.ObjectiveError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--objective") from None
+    folder = Path(out or Path("runs") / f"falsify-{Path(scenario).stem}")
+    console = _console()
+
+    def progress(generation: int, got, vals) -> None:  # noqa: ANN001
+        finite = [v for v in vals if v == v]
+        console.print(f"generation {generation}: {len(got)} runs, lowest {obj.text} {min(finite) if finite else float('nan'):.4g}",
+                      markup=False)
+
+    with _campaign_executor(scheduler, jobs) as executor:
+        res = F.falsify(scenario, scn.spec.parameters, obj, budget=budget, optimizer=optimizer, seed=seed, batch=batch,
+                        run_batch=_batch_runner(executor, str(folder / "runs"), False), on_batch=progress)
+    rows = table_rows(res.results, folder, batches=res.batches, objective=obj.of)
+    write_table(rows, folder)
+    summary = F.describe(res, obj)
+    ce = res.counterexample
+    if ce is not None:
+        header = (f"counterexample found by twolevel falsify ({res.optimizer}, seed {seed}) after {res.first} simulations:\n"
+                  f"{obj.text} = {res.values[res.first - 1]:.6g}; failed: {', '.join(ce.failed) or ce.outcome}")
+        path, _ = write_concrete(ce.case, folder / "counterexample.yaml", header)
+        if ce.run_dir:
+            shutil.rmtree(folder / "counterexample", ignore_errors=True)
+            shutil.copytree(ce.run_dir, folder / "counterexample")
+        summary["counterexample_file"] = str(path)
+    from twolevel.sim.summary import jsonable
+
+    write_json_atomic(folder / "falsify.json", jsonable(summary))
+    report = write_campaign_report(folder, rows, scn.spec.parameters, obj.text, title=f"falsification of {scenario}",
+                                   first=res.first)
+    if ce is None:
+        best = summary["best"]
+        console.print(f"no counterexample in {len(res.results)} simulations ({res.optimizer}); lowest {obj.text} "
+                      f"{json.dumps(best['objective'] if best else None)} at {json.dumps(best['parameters'] if best else None)}; "
+                      f"report: {report}", markup=False)
+        raise typer.Exit(EXIT_OK)
+    console.print(f"counterexample after {res.first} simulations ({res.optimizer}): "
+                  f"{', '.join(f'{k} = {v:g}' for k, v in ce.case.parameters.items())}; {obj.text} = "
+                  f"{res.values[res.first - 1]:.4g}; scenario: {folder / 'counterexample.yaml'}; report: {report}", markup=False)
+    raise typer.Exit(EXIT_FAIL)
+
+
 def main() -> None:
     """Console-script entry point: never let a Python traceback reach the user."""
     try:

@@ -19,7 +19,7 @@ import multiprocessing
 import os
 from typing import Any, Callable
 
-__all__ = ["Executor", "make_executor", "pin_threads", "THREAD_VARIABLES", "ExecutorError"]
+__all__ = ["Executor", "make_executor", "pin_threads", "worker_threads", "usable_cores", "THREAD_VARIABLES", "ExecutorError"]
 
 #: Environment variables that size the BLAS and OpenMP thread pools.
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS",
@@ -90,3 +90,8 @@ def usable_cores() -> int:
         return len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux
         return os.cpu_count() or 1
+
+
+def worker_threads() -> dict[str, str | None]:
+    """The thread settings of the process this runs in (to check what a worker was given)."""
+    return {name: os.environ.get(name) for name in THREAD_VARIABLES}

@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Mapping
+from typing import Any, Mapping
 
 from twolevel.diagnostics import Diagnostic, Span
 from twolevel.verdict.criteria import Verdict, judge
 
-__all__ = ["judge_run", "recorded_verdict", "VERDICT_KEY", "EDGES_KEY"]
+__all__ = ["judge_run", "recorded_verdict", "criteria_of", "VERDICT_KEY", "EDGES_KEY"]
 
 VERDICT_KEY = "verdict"
 EDGES_KEY = "road_edges"
@@ -61,3 +61,19 @@ def recorded_verdict(meta: Mapping[str, object]) -> Verdict | None:
     """The verdict ``run.json`` holds (None if the run was never judged)."""
     raw = meta.get(VERDICT_KEY)
     return Verdict.from_json(raw) if isinstance(raw, Mapping) else None
+
+
+def criteria_of(scn: Any) -> list[str]:
+    """The names of the criteria a loaded scenario's runs are judged by, in verdict order."""
+    from twolevel.verdict.criteria import RULE_PREFIX
+    from twolevel.world.world import build_world, load_rulesets
+
+    e = scn.spec.expect
+    names = [n for n, on in (("goal", e.goal is not None), ("on_road", e.on_road is not None),
+                             ("no_collision", e.no_collision)) if on]
+    if e.rules == "all":
+        sets, _ = load_rulesets(build_world(scn))
+        names += [RULE_PREFIX + r.name for rs in sets for r in rs.rules]
+    else:
+        names += [RULE_PREFIX + r for r in e.rules]
+    return names + [n for n in ("max_decel", "max_jerk", "max_lat_accel", "min_gap", "max_stopped") if getattr(e, n) is not None]
