@@ -132,3 +132,17 @@ def test_margins_agree_with_pass_and_fail(road_world, speeds: list[float], later
         assert c.passed == (c.margin >= 0), c
         assert not math.isnan(c.margin)
     assert verdict.passed == all(c.passed for c in verdict.criteria)
+
+
+def test_the_report_shows_the_verdict_the_goal_and_the_road(stuck_run: Path, tmp_path: Path) -> None:
+    from twolevel.report import build_report
+
+    res = build_report(stuck_run, gif=False, formats=("png",), out_dir=tmp_path / "report")
+    page = Path(res.html).read_text()
+    assert "FAIL: max_stopped." in page and "longest standstill" in page and "Goal:</strong> not judged" in page
+    names = {Path(f).stem for f in res.files if f.endswith(".png")}
+    assert {"path", "motion", "tracking_error"} <= names
+    assert not [p for p in res.problems if "road edges" in p]
+    summary = json.loads((tmp_path / "report" / "summary.json").read_text())
+    assert summary["verdict"]["passed"] is False
+    assert "## Verdict" in (tmp_path / "report" / "summary.md").read_text()

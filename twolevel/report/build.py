@@ -133,7 +133,15 @@ def _write(
 
     main, m0 = runs[0], metrics[0]
     files: list[str] = []
-    series = [Series(m.label, r, m) for r, m in zip(runs, metrics) if m.rows > 0]
+    from twolevel.report.road import road_of
+
+    series = []
+    for r, m in zip(runs, metrics):
+        if m.rows > 0:
+            road, why = road_of(r)
+            if why is not None and r is main:
+                problems.append(why)
+            series.append(Series(m.label, r, m, road))
     figures: tuple[Any, ...] = ()
     if series:
         figures, skipped = render_figures(series, out / FIGURES_DIR, formats)

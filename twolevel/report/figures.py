@@ -34,6 +34,7 @@ class Series:
     label: str
     run: RunData
     metrics: Metrics
+    road: Any = None  # twolevel.report.road.Road: lane edges and the road band along the run
 
     def col(self, name: str) -> np.ndarray | None:
         c = self.run.columns.get(name)
@@ -138,7 +139,64 @@ def _latency(fig: Any, series: Sequence[Series]) -> bool:
     return True
 
 
+def _bound(s: Series, name: str) -> float | None:
+    """A criterion's bound from the run's recorded verdict (None when not judged)."""
+    for c in (s.run.meta.get("verdict") or {}).get("criteria", []):
+        if c.get("name") == name and isinstance(c.get("bound"), (int, float)):
+            return float(c["bound"])
+    return None
+
+
+def _path(fig: Any, series: Sequence[Series]) -> bool:
+    drawn = [s for s in series if s.col("x") is not None and s.col("y") is not None]
+    if not drawn:
+        return False
+    ax = fig.subplots()
+    edges = next((s.road.edges for s in drawn if s.road is not None), None) or drawn[0].run.meta.get("road_edges")
+    for k, line in enumerate(edges or []):
+        xy = np.asarray(line, dtype=float)
+        ax.plot(xy[:, 0], xy[:, 1], color="0.55", linewidth=0.8, label="lane edges" if k == 0 else None)
+    for i, s in enumerate(drawn):
+        x, y = s.col("x"), s.col("y")
+        ax.plot(x, y, color=_colour(i), linewidth=1.4, label=s.label if len(series) > 1 else "ego path")
+        ax.plot(x[:1], y[:1], "o", color=_colour(i), markersize=4)
+        ax.plot(x[-1:], y[-1:], "s", color=_colour(i), markersize=4)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set(xlabel="x [m]", ylabel="y [m]", title="Path and road edges (o start, ■ end)")
+    _legend(ax)
+    return True
+
+
+def _motion(fig: Any, series: Sequence[Series]) -> bool:
+    from twolevel.verdict.motion import motion_of
+
+    drawn = [s for s in series if all(s.col(c) is not None for c in ("v", "psi")) and s.t.size > 2]
+    if not drawn:
+        return False
+    ax_a, ax_l, ax_j = fig.subplots(3, 1, sharex=True)
+    for i, s in enumerate(drawn):
+        mo = motion_of(s.t, s.col("v"), s.col("psi"))
+        lab = s.label if len(series) > 1 else None
+        ax_a.plot(mo.t_acc, mo.accel, color=_colour(i), linewidth=1.0, label=lab or "longitudinal")
+        ax_l.plot(mo.t_acc, mo.lat_accel, color=_colour(i), linewidth=1.0, label=lab or "lateral")
+        ax_j.plot(mo.t_jerk, mo.jerk, color=_colour(i), linewidth=1.0, label=lab or "jerk")
+        for ax, name, sign in ((ax_a, "max_decel", -1), (ax_l, "max_lat_accel", 0), (ax_j, "max_jerk", 0)):
+            b = _bound(s, name)
+            if b is not None:
+                for y in ((-b,) if sign < 0 else (-b, b)):
+                    ax.axhline(y, color=_colour(i), label=f"bound {b:g}" if y == -b else None, **LIMIT)
+    ax_a.set(ylabel="accel. [m/s²]", title="Acceleration (< 0: deceleration), lateral acceleration, jerk")
+    ax_l.set(ylabel="lateral [m/s²]")
+    ax_j.set(xlabel="time [s]", ylabel="jerk [m/s³]")
+    for ax in (ax_a, ax_l, ax_j):
+        _legend(ax)
+    return True
+
+
 def _tracking(fig: Any, series: Sequence[Series]) -> bool:
+    road = [s for s in series if s.road is not None and s.col("e") is not None]
+    if road:
+        return _tracking_road(fig, series, road)
     ax = fig.subplots()
     drawn = False
     for i, s in enumerate(series):
@@ -154,6 +212,24 @@ def _tracking(fig: Any, series: Sequence[Series]) -> bool:
         return False
     ax.set_ylim(bottom=0)
     ax.set(xlabel="time [s]", ylabel="distance from reference path [m]", title="Tracking error")
+    _legend(ax)
+    return True
+
+
+def _tracking_road(fig: Any, series: Sequence[Series], road: Sequence[Series]) -> bool:
+    ax = fig.subplots()
+    first = road[0].road
+    ax.fill_between(first.t, first.right, first.left, color="0.92", step="mid", label="road")
+    ax.plot(first.t, first.left, color="0.4", linewidth=1.0, label="road edges")
+    ax.plot(first.t, first.right, color="0.4", linewidth=1.0)
+    ax.plot(first.t, first.lane, color="0.4", label="route lane edges", **LIMIT)
+    ax.plot(first.t, -first.lane, color="0.4", **LIMIT)
+    for i, s in enumerate(series):
+        e = s.col("e")
+        if e is not None:
+            ax.plot(s.t, e, color=_colour(i), linewidth=1.2, label=s.label if len(series) > 1 else "lateral offset of the ego")
+    ax.axhline(0.0, color="k", linewidth=0.6)
+    ax.set(xlabel="time [s]", ylabel="offset from the route [m], + left", title="Tracking error and road edges")
     _legend(ax)
     return True
 
@@ -321,7 +397,9 @@ def _decisions(fig: Any, series: Sequence[Series]) -> bool:
 FIGURES: dict[str, tuple[str, Callable[[Any, Sequence[Series]], bool], float]] = {
     "control_rate": ("Control rate over time", _control_rate, 3.4),
     "latency": ("Control-step latency by level", _latency, 3.6),
+    "path": ("Path and road edges", _path, 4.2),
     "tracking_error": ("Tracking error", _tracking, 3.4),
+    "motion": ("Acceleration, deceleration and jerk", _motion, 5.4),
     "speed": ("Speed and speed limit", _speed, 3.4),
     "light_state": ("Traffic-light state", _lights, 1.9),
     "distance": ("Distance to other vehicles", _distance, 5.4),

@@ -47,6 +47,20 @@ def _run_row(m: Metrics, meta: Mapping[str, Any]) -> tuple[str, ...]:
             str(meta.get("seed", "—")), str(m.rows))
 
 
+def _verdict_section(meta: Mapping[str, Any]) -> str:
+    from twolevel.report.verdict import CRITERIA_HEADER, criteria_rows, goal_status, verdict_line, verdict_of
+
+    verdict = verdict_of(meta)
+    klass = "warn" if verdict is None else ("ok" if verdict.passed else "alert")
+    parts = ["<h2>Verdict</h2>", f'<div class="{klass}">{_e(verdict_line(verdict))}</div>',
+             f"<p><strong>Goal:</strong> {_e(goal_status(verdict))}</p>"]
+    rows = criteria_rows(verdict)
+    if rows:
+        parts.append(_table(CRITERIA_HEADER, rows, numeric_from=2))
+        parts.append("<p>Margin: how far a criterion is from failing, in the unit of its bound (&lt; 0 fails).</p>")
+    return "".join(parts)
+
+
 def _latency_table(m: Metrics) -> str:
     if m.latency is None:
         return ""
@@ -152,6 +166,7 @@ def render_html(
     if problems:
         items = "".join(f"<li>{_e(p)}</li>" for p in problems)
         body.append(f'<div class="warn"><strong>This report is partial or has caveats:</strong><ul>{items}</ul></div>')
+    body.append(_verdict_section(meta))
     body.append("<h2>Summary</h2>" + _table(("metric", "value"), headline(metrics)))
     body.append(_latency_table(metrics))
     body.append(_rules_section(metrics))

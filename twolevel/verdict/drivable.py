@@ -13,9 +13,9 @@ from typing import Sequence
 
 import numpy as np
 
-from twolevel.world.geometry import LaneSet, box_corners
+from twolevel.world.geometry import LaneSet, Polyline, box_corners
 
-__all__ = ["outside", "box_outside", "lane_edges"]
+__all__ = ["outside", "box_outside", "lane_edges", "road_band"]
 
 _BLOCK = 256  # points per block: keeps the (points × intervals) arrays small
 
@@ -92,3 +92,20 @@ def lane_edges(lanes: LaneSet, spacing: float = 2.0) -> list[list[list[float]]]:
         for side in (-0.5, 0.5):
             out.append(np.round(lane.position(s, side * lane.width), 2).tolist())
     return out
+
+
+def road_band(lanes: LaneSet, route: Polyline, s: np.ndarray, reach: float = 15.0, step: float = 0.1
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """How far the drivable area reaches to the left (+) and right (−) of the route [m] at route
+    positions ``s`` (N,) [m]: the first lateral offset (within ``reach``, every ``step``) whose
+    point is outside every lane."""
+    s = np.asarray(s, dtype=float)
+    offsets = np.arange(step, reach + step / 2, step)
+    out = []
+    for sign in (1.0, -1.0):
+        lat = sign * offsets
+        pts = route.position(np.repeat(s, lat.size), np.tile(lat, s.size)).reshape(-1, 2)
+        off = outside(lanes, pts).reshape(s.size, lat.size) > 0
+        first = np.where(off.any(axis=1), np.argmax(off, axis=1), lat.size - 1)
+        out.append(lat[first] - sign * step / 2)
+    return out[0], out[1]
