@@ -437,21 +437,20 @@ def _campaign_executor(scheduler: Optional[str], jobs: Optional[int]):  # noqa: 
         raise typer.Exit(EXIT_USAGE)
 
 
-_OUTCOME_STYLE = {"passed": "green", "failed": "bold red", "error": "bold magenta", "running": "cyan", "queued": "dim"}
+_OUTCOME_STYLE = {"passed": "green", "failed": "bold red", "error": "bold magenta"}
 
 
 def _suite_table(rows: dict, shown: int = 40):  # noqa: ANN001, ANN202 - rich is imported lazily
-    """The live table of a suite: each case's state, time and failed criteria (the last ones)."""
+    """The live table of a suite: the cases done so far (the last ``shown``), each with its
+    outcome, time and failed criteria."""
     from rich.markup import escape
     from rich.table import Table
 
-    done = sum(1 for r in rows.values() if r[0] not in ("queued", "running"))
-    table = Table(title=f"{done}/{len(rows)} cases done", title_justify="left")
+    done = [kv for kv in rows.items() if kv[1][0] != "pending"]
+    table = Table(title=f"{len(done)}/{len(rows)} cases done", title_justify="left")
     for col in ("case", "outcome", "time [s]", "failed criteria"):
         table.add_column(col)
-    items = list(rows.items())
-    active = [kv for kv in items if kv[1][0] == "running"] + [kv for kv in items if kv[1][0] not in ("queued", "running")]
-    for case_id, (state, secs, failed) in active[-shown:]:
+    for case_id, (state, secs, failed) in done[-shown:]:
         table.add_row(escape(case_id), f"[{_OUTCOME_STYLE.get(state, '')}]{state}[/]", secs, escape(failed))
     return table
 
@@ -477,8 +476,6 @@ def test_scenarios(
     Exit 0 when every case passed, 1 when some case failed or could not be run, 2 on a usage
     error (no scenario found, a bad -k expression, no Dask scheduler there).
     """
-    import json
-
     from twolevel.atomic import write_json_atomic, write_text_atomic
     from twolevel.campaign import suite as S
 
@@ -500,11 +497,8 @@ def test_scenarios(
     if not cases:
         console.print(f"no case matches -k {keyword!r}", markup=False)
         raise typer.Exit(EXIT_USAGE)
-    rows = {c.id: ("queued", "", "") for c in cases}
+    rows = {c.id: ("pending", "", "") for c in cases}
     live_view = sys.stdout.isatty()
-
-    def started(case) -> None:  # noqa: ANN001
-        rows[case.id] = ("running", "", "")
 
     def finished(r) -> None:  # noqa: ANN001
         rows[r.case.id] = (r.outcome, f"{r.wall_s:.1f}", ", ".join(r.failed) or (r.messages[0].splitlines()[0][:80] if r.messages else ""))
@@ -518,7 +512,7 @@ def test_scenarios(
             from rich.live import Live
 
             with Live(_suite_table(rows), console=console, refresh_per_second=4) as live:
-                result = S.run_cases(cases, executor, runs_dir, keep_passed=keep_passed, on_start=started, on_result=finished)
+                result = S.run_cases(cases, executor, runs_dir, keep_passed=keep_passed, on_result=finished)
         else:
             result = S.run_cases(cases, executor, runs_dir, keep_passed=keep_passed, on_result=finished)
     S.write_cache(cache_file, result.results)
@@ -640,12 +634,9 @@ def falsify(
     Exit 1 when a counterexample was found, 0 when none was within the budget, 2 on a usage error.
     """
     import json
-    import shutil
     from pathlib import Path
 
-    from twolevel.atomic import write_json_atomic
     from twolevel.campaign import falsify as F
-    from twolevel.campaign.case import write_concrete
     from twolevel.campaign.report import write_campaign_report
     from twolevel.campaign.results import table_rows, write_table
     from twolevel.verdict.judge import criteria_of
@@ -670,21 +661,10 @@ def falsify(
                         run_batch=_batch_runner(executor, str(folder / "runs"), False), on_batch=progress)
     rows = table_rows(res.results, folder, batches=res.batches, objective=obj.of)
     write_table(rows, folder)
-    summary = F.describe(res, obj)
-    ce = res.counterexample
-    if ce is not None:
-        header = (f"counterexample found by twolevel falsify ({res.optimizer}, seed {seed}) after {res.first} simulations:\n"
-                  f"{obj.text} = {res.values[res.first - 1]:.6g}; failed: {', '.join(ce.failed) or ce.outcome}")
-        path, _ = write_concrete(ce.case, folder / "counterexample.yaml", header)
-        if ce.run_dir:
-            shutil.rmtree(folder / "counterexample", ignore_errors=True)
-            shutil.copytree(ce.run_dir, folder / "counterexample")
-        summary["counterexample_file"] = str(path)
-    from twolevel.sim.summary import jsonable
-
-    write_json_atomic(folder / "falsify.json", jsonable(summary))
+    summary = F.record(res, obj, folder, seed)
     report = write_campaign_report(folder, rows, scn.spec.parameters, obj.text, title=f"falsification of {scenario}",
                                    first=res.first)
+    ce = res.counterexample
     if ce is None:
         best = summary["best"]
         console.print(f"no counterexample in {len(res.results)} simulations ({res.optimizer}); lowest {obj.text} "

@@ -90,7 +90,7 @@ def test_run_directories_are_kept_for_failures_and_reproduce(suite_run, tmp_path
 
 def test_keyword_expressions_select_like_pytest() -> None:
     everything, _ = discover([str(SCENARIOS)])
-    assert not any(c.id.endswith(("road.yaml", "lane.yaml")) for c in everything)  # maps are not cases
+    assert not {Path(c.id).name for c in everything} & {"road.yaml", "lane.yaml"}  # maps are not cases
     cases, _ = discover([str(SUITE)])
     ids = lambda expr: [_short(c.id) for c in select(cases, expr)]  # noqa: E731
     assert ids("goal_at") == ["goal_at.yaml", "goal_at.yaml::far", "goal_at.yaml::late"]

@@ -19,15 +19,19 @@ finished first) or when the budget of simulations is spent. Deterministic for a 
 from __future__ import annotations
 
 import math
+import os
+import shutil
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Callable, Mapping, Protocol, Sequence
 
 import numpy as np
 
 from twolevel.campaign.case import Case, CaseResult
+from twolevel.campaign.sampling import values_at
 from twolevel.world.schema import Parameter
 
-__all__ = ["Objective", "parse_objective", "Search", "make_search", "falsify", "FalsifyResult", "OPTIMIZERS",
+__all__ = ["Objective", "parse_objective", "Search", "make_search", "falsify", "record", "FalsifyResult", "OPTIMIZERS",
            "ObjectiveError"]
 
 OPTIMIZERS = ("cma", "ce", "random")
@@ -178,8 +182,6 @@ def falsify(scenario: str, params: Mapping[str, Parameter], objective: Objective
     values: list[float] = []
     first: int | None = None
     generation = 0
-    from twolevel.campaign.sampling import values_at
-
     while len(results) < budget and first is None:
         generation += 1
         points = search.ask()
@@ -201,13 +203,38 @@ def falsify(scenario: str, params: Mapping[str, Parameter], objective: Objective
     return FalsifyResult(tuple(results), tuple(batches), tuple(values), used, first)
 
 
-def describe(result: FalsifyResult, objective: Objective) -> dict[str, Any]:
-    """A JSON summary of a search."""
+COUNTEREXAMPLE_FILE = "counterexample.yaml"
+COUNTEREXAMPLE_RUN = "counterexample"
+SUMMARY_FILE = "falsify.json"
+
+
+def record(result: FalsifyResult, objective: Objective, folder: str | os.PathLike[str], seed: int) -> dict[str, Any]:
+    """Write a search's outcome into ``folder``: ``falsify.json`` (the summary returned) and,
+    when one was found, the counterexample as a standalone scenario (``counterexample.yaml``)
+    with a copy of its run directory (``counterexample/``)."""
+    from twolevel.atomic import write_json_atomic
+    from twolevel.campaign.case import write_concrete
+    from twolevel.sim.summary import jsonable
+
+    out = Path(folder)
     best = result.best
-    return {
-        "objective": objective.text, "optimizer": result.optimizer, "simulations": len(result.results),
+    summary: dict[str, Any] = {
+        "objective": objective.text, "optimizer": result.optimizer, "seed": seed, "simulations": len(result.results),
         "first_counterexample": result.first,
         "counterexample": None if result.counterexample is None else dict(result.counterexample.case.parameters),
         "best": None if best is None else {"parameters": dict(best.case.parameters),
                                            "objective": result.values[result.results.index(best)]},
     }
+    ce = result.counterexample
+    if ce is not None and result.first is not None:
+        header = (f"counterexample found by twolevel falsify ({result.optimizer}, seed {seed}) after {result.first} "
+                  f"simulations:\n{objective.text} = {result.values[result.first - 1]:.6g}; "
+                  f"failed: {', '.join(ce.failed) or ce.outcome}")
+        path, _ = write_concrete(ce.case, out / COUNTEREXAMPLE_FILE, header)
+        summary["counterexample_file"] = str(path)
+        if ce.run_dir:
+            shutil.rmtree(out / COUNTEREXAMPLE_RUN, ignore_errors=True)
+            shutil.copytree(ce.run_dir, out / COUNTEREXAMPLE_RUN)
+            summary["counterexample_run"] = str(out / COUNTEREXAMPLE_RUN)
+    write_json_atomic(out / SUMMARY_FILE, jsonable(summary))
+    return summary

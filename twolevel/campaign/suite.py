@@ -171,7 +171,6 @@ def run_dir_name(case_id: str) -> str:
 
 def run_cases(cases: Sequence[Case], executor: Executor, runs_dir: str | os.PathLike[str], *,
               keep_passed: bool = False, frames: bool = True,
-              on_start: Callable[[Case], None] | None = None,
               on_result: Callable[[CaseResult], None] | None = None) -> SuiteResult:
     """Run every case on ``executor`` (run directories ``runs_dir/<case>``) and collect the
     results in case order; ``on_result`` is called as each case finishes (for a live view)."""
@@ -180,8 +179,6 @@ def run_cases(cases: Sequence[Case], executor: Executor, runs_dir: str | os.Path
     for i, case in enumerate(cases):
         run_dir = str(Path(runs_dir) / run_dir_name(case.id))
         futures[executor.submit(run_case, case, run_dir, keep_passed, frames)] = i
-        if on_start is not None:
-            on_start(case)
     out: list[CaseResult | None] = [None] * len(cases)
     for fut in as_completed(futures):
         i = futures[fut]
