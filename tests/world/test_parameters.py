@@ -10,6 +10,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from twolevel.world.lint import lint_world_file
 from twolevel.world.loader import check_world_file, load_scenario
 from twolevel.world.parameters import ExpressionError, evaluate
 
@@ -40,6 +41,13 @@ def _write(tmp_path: Path, text: str = SCENARIO) -> Path:
     path = tmp_path / "s.yaml"
     path.write_text(text.format(map=ROOT / "maps" / "urban.yaml"))
     return path
+
+
+def _checked(path: Path) -> list:
+    """What ``twolevel check`` reports for a scenario file."""
+    from twolevel.pipeline import check
+
+    return list(check([str(path)]).diagnostics)
 
 
 def test_references_become_numbers_nominal_or_given(tmp_path: Path) -> None:
@@ -76,20 +84,20 @@ def test_bad_references_are_diagnostics(tmp_path: Path) -> None:
 
 
 def test_check_warns_where_a_range_makes_the_scenario_invalid(tmp_path: Path) -> None:
-    assert check_world_file(_write(tmp_path)) == []
-    diags = check_world_file(_write(tmp_path, SCENARIO.replace("[10, 60]", "[10, 400]")))
+    assert check_world_file(_write(tmp_path)) == [] and lint_world_file(_write(tmp_path)) == []
+    diags = _checked(_write(tmp_path, SCENARIO.replace("[10, 60]", "[10, 400]")))
     assert [d.code for d in diags] == ["YML426"]
     assert diags[0].span.line == 4 and "gap = 400" in diags[0].message and "beyond the end" in diags[0].message
 
 
 def test_check_warns_when_the_goal_is_out_of_reach(tmp_path: Path) -> None:
-    diags = check_world_file(_write(tmp_path, SCENARIO.replace("duration: 60", "duration: 20")))
+    diags = _checked(_write(tmp_path, SCENARIO.replace("duration: 60", "duration: 20")))
     assert [d.code for d in diags] == ["YML427"] and "at least 28.8 s" in diags[0].message
     text = SCENARIO.replace("run:", "expect: {{goal: {{by: 25}}}}\nrun:")
-    diags = check_world_file(_write(tmp_path, text))
+    diags = _checked(_write(tmp_path, text))
     assert [d.code for d in diags] == ["YML427"] and "deadline is 25 s" in diags[0].message
     text = SCENARIO.replace("duration: 60", "duration: 20").replace("run:", "expect: {{goal: false}}\nrun:")
-    assert check_world_file(_write(tmp_path, text)) == []
+    assert _checked(_write(tmp_path, text)) == []
 
 
 @given(st.floats(-1e6, 1e6), st.floats(-1e6, 1e6), st.floats(0.1, 1e3))

@@ -107,9 +107,11 @@ def check(paths: Sequence[str], *, dt: float | None = None, horizon: int | None 
             if result.source is not None:
                 sources[file] = result.source
         else:
+            from twolevel.world.lint import lint_world_file
             from twolevel.world.loader import check_world_file
 
             diags.extend(check_world_file(file))
+            diags.extend(lint_world_file(file))
             sources.setdefault(file, read_text_quietly(file))
     return CheckResult(tuple(dedupe(diags)), len(files), sources)
 

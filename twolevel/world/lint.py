@@ -23,7 +23,7 @@ from twolevel.world.schema import Parameter
 if TYPE_CHECKING:
     from twolevel.world.loader import Scenario
 
-__all__ = ["lint_scenario", "extremes", "MAX_CORNERS"]
+__all__ = ["lint_scenario", "lint_world_file", "extremes", "MAX_CORNERS"]
 
 MAX_CORNERS = 16
 """Parameter boxes with at most this many corners are also checked at every corner."""
@@ -121,3 +121,16 @@ def _goal_time(scn: "Scenario") -> list[Diagnostic]:
 def lint_scenario(scn: "Scenario") -> list[Diagnostic]:
     """Every warning of this module for a loaded scenario."""
     return _parameter_ranges(scn) + _goal_time(scn)
+
+
+def lint_world_file(path: str) -> list[Diagnostic]:
+    """The warnings of this module for a ``.yaml`` file: none for a map or a scenario that does
+    not load (``check_world_file`` reports why)."""
+    from twolevel.world.document import read_document
+    from twolevel.world.loader import file_kind, load_scenario
+
+    doc, _ = read_document(path)
+    if doc is None or file_kind(doc.data) != "scenario":
+        return []
+    scn, _ = load_scenario(path)
+    return lint_scenario(scn) if scn is not None else []

@@ -573,10 +573,6 @@ def check_world_file(path: str | os.PathLike[str]) -> list[Diagnostic]:
         return diags
     rule_files = scenario.rules if scenario else ()
     diags += _lint_rules(rule_files, spec)
-    if scenario is not None:
-        from twolevel.world.lint import lint_scenario
-
-        diags += lint_scenario(scenario)
     return diags
 
 
