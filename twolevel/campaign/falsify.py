@@ -98,12 +98,14 @@ class _Random:
 
 
 class _CrossEntropy:
-    """A Gaussian sampling distribution refitted to the best quarter of each batch (smoothed)."""
+    """A Gaussian sampling distribution refitted to the best 30 % of each batch, smoothed, its
+    spread kept above ``floor`` (so it does not collapse before it reaches the region)."""
 
-    def __init__(self, d: int, batch: int, seed: int, elite: float = 0.25, smoothing: float = 0.7) -> None:
+    def __init__(self, d: int, batch: int, seed: int, elite: float = 0.3, smoothing: float = 0.8,
+                 floor: float = 0.05) -> None:
         self.rng, self.batch = np.random.default_rng(seed), batch
         self.mean, self.std = np.full(d, 0.5), np.full(d, 0.3)
-        self.n_elite, self.alpha = max(2, int(math.ceil(elite * batch))), smoothing
+        self.n_elite, self.alpha, self.floor = max(3, int(math.ceil(elite * batch))), smoothing, floor
 
     def ask(self) -> np.ndarray:
         return np.clip(self.mean + self.std * self.rng.standard_normal((self.batch, self.mean.size)), 0.0, 1.0)
@@ -111,7 +113,7 @@ class _CrossEntropy:
     def tell(self, points: np.ndarray, values: np.ndarray) -> None:
         best = points[np.argsort(values, kind="stable")[: self.n_elite]]
         self.mean = self.alpha * best.mean(axis=0) + (1 - self.alpha) * self.mean
-        self.std = np.maximum(self.alpha * best.std(axis=0) + (1 - self.alpha) * self.std, 0.02)
+        self.std = np.maximum(self.alpha * best.std(axis=0) + (1 - self.alpha) * self.std, self.floor)
 
 
 class _Cma:
@@ -143,7 +145,7 @@ def make_search(optimizer: str, d: int, batch: int | None, seed: int) -> tuple[S
             optimizer = "ce"
     default = 4 + int(3 * math.log(max(d, 1)))
     if optimizer == "ce":
-        return _CrossEntropy(d, batch or max(8, default), seed), "ce"
+        return _CrossEntropy(d, batch or max(12, 2 * default), seed), "ce"
     if optimizer == "random":
         return _Random(d, batch or max(8, default), seed), "random"
     raise ValueError(f"unknown optimizer '{optimizer}': choose one of {', '.join(OPTIMIZERS)}")
