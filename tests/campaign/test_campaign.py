@@ -84,7 +84,7 @@ def test_local_workers_run_with_one_blas_thread() -> None:
 def test_falsify_finds_the_planted_counterexample_and_writes_it_standalone(tmp_path: Path) -> None:
     out = tmp_path / "fa"
     res = runner.invoke(app, ["falsify", str(PLANTED), "--objective", "at_fault", "--budget", "24", "--seed", "0",
-                              "-j", "2", "--out", str(out)])
+                              "--batch", "4", "-j", "2", "--out", str(out)])
     assert res.exit_code == 1, res.output
     summary = json.loads((out / "falsify.json").read_text())
     assert summary["first_counterexample"] is not None and summary["first_counterexample"] <= 24
@@ -108,13 +108,13 @@ def test_falsify_finds_the_planted_counterexample_and_writes_it_standalone(tmp_p
 @pytest.mark.slow
 def test_falsify_reports_none_where_none_exists(tmp_path: Path) -> None:
     out = tmp_path / "none"
-    res = runner.invoke(app, ["falsify", str(NONE), "--objective", "at_fault", "--budget", "12", "-j", "2",
-                              "--optimizer", "ce", "--batch", "6", "--out", str(out)])
+    res = runner.invoke(app, ["falsify", str(NONE), "--objective", "at_fault", "--budget", "8", "-j", "2",
+                              "--optimizer", "ce", "--batch", "4", "--out", str(out)])
     assert res.exit_code == 0, res.output
-    assert "no counterexample in 12 simulations" in res.stdout
+    assert "no counterexample in 8 simulations" in res.stdout
     assert not (out / "counterexample.yaml").exists()
     rows = read_rows(out / "results.json")
-    assert len(rows) == 12 and all(r["objective"] >= 0 and r["outcome"] == "passed" for r in rows)
+    assert len(rows) == 8 and {r["batch"] for r in rows} == {1, 2} and all(r["objective"] >= 0 and r["outcome"] == "passed" for r in rows)
 
 
 def test_objectives_must_name_what_the_scenario_judges(tmp_path: Path) -> None:
@@ -132,14 +132,14 @@ def _table(folder: Path) -> list[dict]:
 @pytest.mark.slow
 def test_a_dask_cluster_gives_the_table_local_processes_give(tmp_path: Path) -> None:
     distributed = pytest.importorskip("distributed", reason="dask.distributed is not installed (pip install 'twolevel[dask]')")
-    args = ["sweep", str(NONE), "--samples", "4", "--seed", "3", "--objective", "at_fault"]
+    args = ["sweep", str(NONE), "--samples", "3", "--seed", "3", "--objective", "at_fault"]
     assert runner.invoke(app, [*args, "-j", "2", "--out", str(tmp_path / "local")]).exit_code == 0
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
                                   dashboard_address=None) as cluster:
         res = runner.invoke(app, [*args, "--scheduler", cluster.scheduler_address, "--out", str(tmp_path / "dask")])
         assert res.exit_code == 0, res.output
     local, remote = _table(tmp_path / "local"), _table(tmp_path / "dask")
-    assert len(local) == 4 and local == remote
+    assert len(local) == 3 and local == remote
     assert all(math.isfinite(r["objective"]) for r in local)
 
 
