@@ -153,7 +153,7 @@ def psytaliro(budget: int, seeds: int) -> None:
                 return 1e6 if v != v else min(v, 1e6)
 
             bounds = {k: tuple(scn.spec.parameters[k].range) for k in names}
-            opts = staliro.TestOptions(static_inputs=bounds, iterations=budget, runs=1, seed=seed)
+            opts = staliro.TestOptions(static_inputs=bounds, iterations=budget, runs=1, seed=seed + 1)  # it wants > 0
             runs = staliro.staliro(cost, DualAnnealing(min_cost=0.0), opts)
             costs = [e.cost for e in runs[0].evaluations]
             firsts.append(next((i + 1 for i, c in enumerate(costs) if c < 0), None))
