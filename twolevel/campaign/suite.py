@@ -55,7 +55,7 @@ def discover(paths: Sequence[str]) -> tuple[list[Case], list[Diagnostic]]:
     """The cases below ``paths``: each scenario file once (maps and rule files are skipped),
     then one case per variant it lists. Unreadable scenarios still give a case (it errors
     when run, with its diagnostics)."""
-    from twolevel.pipeline import RULE_SUFFIXES, collect_paths
+    from twolevel.pipeline.checking import RULE_SUFFIXES, collect_paths
     from twolevel.verdict.codes import SIM621
     from twolevel.world.document import read_document
     from twolevel.world.loader import file_kind
