@@ -122,11 +122,13 @@ def test_failed_first_runs_the_cached_failure_first(tmp_path: Path) -> None:
 
 def test_usage_errors_exit_2(tmp_path: Path) -> None:
     (tmp_path / "empty").mkdir()
-    assert runner.invoke(app, ["test", str(tmp_path / "empty")]).exit_code == 2
-    assert runner.invoke(app, ["test", str(tmp_path / "missing")]).exit_code == 2
-    assert runner.invoke(app, ["test", str(SUITE), "-k", "crash and"]).exit_code == 2
-    assert runner.invoke(app, ["test", str(SUITE), "-k", "nothing"]).exit_code == 2
-    assert runner.invoke(app, ["test", str(SUITE), "--scheduler", "nowhere"]).exit_code == 2
+    cache = ["--cache-file", str(tmp_path / "cache.json"), "--runs-dir", str(tmp_path / "runs")]
+    assert runner.invoke(app, ["test", str(tmp_path / "empty"), *cache]).exit_code == 2
+    assert runner.invoke(app, ["test", str(tmp_path / "missing"), *cache]).exit_code == 2
+    assert runner.invoke(app, ["test", str(SUITE), "-k", "crash and", *cache]).exit_code == 2
+    assert runner.invoke(app, ["test", str(SUITE), "-k", "nothing", *cache]).exit_code == 2
+    assert runner.invoke(app, ["test", str(SUITE), "--scheduler", "nowhere", *cache]).exit_code == 2
+    assert not (tmp_path / "cache.json").exists()  # nothing ran, nothing to remember
 
 
 @pytest.mark.slow
@@ -134,7 +136,7 @@ def test_the_same_seed_gives_the_same_results(tmp_path: Path) -> None:
     outs = []
     for k in range(2):
         args = ["test", str(SUITE), "-k", "late or crash", "--seed", "5", "-j", "2", "--runs-dir",
-                str(tmp_path / f"runs{k}"), "--json", str(tmp_path / f"r{k}.json")]
+                str(tmp_path / f"runs{k}"), "--json", str(tmp_path / f"r{k}.json"), "--cache-file", str(tmp_path / "c.json")]
         assert runner.invoke(app, args).exit_code == 1
         data = json.loads((tmp_path / f"r{k}.json").read_text())
         outs.append([{key: v for key, v in c.items() if key not in ("wall_s", "run_dir")} for c in data["cases"]])
