@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 
 from twolevel.models.obb import box_corners, box_separation
 from twolevel.world.loader import load_scenario
+from twolevel.world.provided import PROVIDED_SIGNALS, SIGNALS
 from twolevel.world.sensing import Memory, others_predicted, rect_separation, sense
 from twolevel.world.signals import TrafficLog, signals_along
 from twolevel.world.traffic import TrafficState
@@ -59,8 +60,9 @@ def test_batched_prediction_equals_signals_along() -> None:
         log = TrafficLog(others.x.T, others.y.T, others.psi.T, others.v.T, np.ones((T, others.n), bool),
                          parts_len[: others.n], np.full(others.n, 1.8))
         ref = signals_along(w, log, {"x": pts[k, :, 0], "y": pts[k, :, 1], "psi": psi[k], "v": v[k]}, t0=t0)
-        for name in ("s", "e", "v_max", "d_stop", "light_red", "d_light", "d_lead", "v_lead", "min_gap", "n_near"):
+        for name in SIGNALS:
             np.testing.assert_allclose(got[name][k], ref[name], rtol=0, atol=1e-6, err_msg=f"{name} row {k}")
+    assert set(got) == PROVIDED_SIGNALS
     assert np.isfinite(got["d_stop"]).any() and np.isfinite(got["d_lead"]).any()
 
 

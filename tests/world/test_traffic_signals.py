@@ -8,9 +8,8 @@ import numpy as np
 import pytest
 
 from twolevel.world.loader import load_scenario
-from twolevel.world.signals import (
-    PROVIDED_SIGNALS, StopMemory, TrafficLog, horizon_constants, signals_along, update_stop_memory,
-)
+from twolevel.world.provided import PROVIDED_SIGNALS
+from twolevel.world.signals import StopMemory, TrafficLog, horizon_constants, signals_along, update_stop_memory
 from twolevel.world.traffic import GREEN, RED, YELLOW, EgoBox, nearby, step
 from twolevel.world.world import World, build_world
 

@@ -77,6 +77,7 @@ from twolevel.sim.trace import BASE_COLUMNS, RUN_FILE, TraceWriter, write_json_a
 from twolevel.stl.typecheck import RuleSet
 from twolevel.world import traffic as tr
 from twolevel.world.loader import Scenario, load_scenario
+from twolevel.world.provided import SIGNALS
 from twolevel.world.sensing import Memory, Others, others_now, sense
 from twolevel.world.world import World, build_world, load_rulesets
 
@@ -87,11 +88,10 @@ GOAL_ZONE = 1.0
 """[m] How far before the goal a standstill counts as arrived."""
 TIMING_COLUMNS = ("t_high_ms", "t_low_ms", "t_step_ms", "t_plant_ms")
 """Wall-clock columns (excluded from determinism comparisons)."""
-SIGNAL_COLUMNS = ("a", "s", "e", "d_stop", "light_red", "d_light", "d_lead", "v_lead")
-"""Signal columns beyond the base ones, named as the rules read them."""
+SIGNAL_COLUMNS = tuple(name for name in SIGNALS if name not in BASE_COLUMNS)
+"""Signal columns beyond the base ones, named as the rules read them (a, s, e, d_stop, light_red,
+d_light, d_lead, v_lead)."""
 EXTRA_COLUMNS = ("candidates", "ll_violated", "hl_status", "hl_qps", "t_plant_ms")
-_SIGNALS = ("x", "y", "psi", "v", "a", "delta", "s", "e", "v_max", "d_stop", "light_red", "d_light", "d_lead",
-            "v_lead", "min_gap", "n_near")
 _LIGHT_NAMES = {0: "green", 1: "yellow", 2: "red"}
 
 
@@ -263,7 +263,7 @@ class ClosedLoop:
         self.low = LowLevelController(world, self.rules, params=self.params, consts=self.consts)
         self.stats = LoopStats()
         self.collisions = CollisionLog(world)
-        self.columns = RuleColumns(self.rules, self.consts, world.settings.dt, _SIGNALS)
+        self.columns = RuleColumns(self.rules, self.consts, world.settings.dt, SIGNALS)
         self.goal_reached_t: float | None = None
         self.t_wall0 = time.perf_counter()
 
@@ -363,7 +363,7 @@ class ClosedLoop:
         x = fw.initial_state(w.ego.x, w.ego.y, w.ego.psi, w.ego.v, p)
         state = LoopState(x, w.traffic0, Memory.fresh(w), float(w.route.local_coordinates(x[None, :2])[0][0]))
         keep = max([r.past for r in self.rules] + [self.planner.history_depth])
-        out = Recorders(writer, frames, History(_SIGNALS, keep))
+        out = Recorders(writer, frames, History(SIGNALS, keep))
         self.low.warm_up(x)
         rollout(x, np.zeros((1, 1, 2)), dt, p)  # compile the plant step before timing anything
         recent: deque[float] = deque(maxlen=20)

@@ -556,7 +556,7 @@ def check_world_file(path: str | os.PathLike[str]) -> list[Diagnostic]:
     """Everything ``twolevel check`` reports for one ``.yaml``/``.yml`` map or scenario file.
 
     A scenario is checked with its map and, through ``twolevel.stl.lint.check_file``, its rule
-    files (with the scenario's dt, horizon H and :data:`~twolevel.world.signals.PROVIDED_SIGNALS`).
+    files (with the scenario's dt, horizon H and :data:`~twolevel.world.provided.PROVIDED_SIGNALS`).
     """
     doc, diags = read_document(path)
     if doc is None:

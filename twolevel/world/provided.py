@@ -29,9 +29,12 @@ which is also the u_{-1} of the cost term ‖u_0 − u_{-1}‖²) all follow it.
 
 from __future__ import annotations
 
-PROVIDED_SIGNALS: frozenset[str] = frozenset(
-    {"x", "y", "psi", "v", "a", "delta", "s", "e", "v_max", "d_stop", "light_red", "d_light",
-     "d_lead", "v_lead", "min_gap", "n_near"}
-)
+SIGNALS: tuple[str, ...] = ("x", "y", "psi", "v", "a", "delta", "s", "e", "v_max", "d_stop", "light_red",
+                            "d_light", "d_lead", "v_lead", "min_gap", "n_near")
+"""Every signal the world provides, in the order of the table above (the one list of their names:
+the simulator's history and trace columns follow this order)."""
 
-__all__ = ["PROVIDED_SIGNALS"]
+PROVIDED_SIGNALS: frozenset[str] = frozenset(SIGNALS)
+"""The same names as a set (what the type checker accepts as a rule's inputs)."""
+
+__all__ = ["SIGNALS", "PROVIDED_SIGNALS"]

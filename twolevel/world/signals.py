@@ -42,7 +42,7 @@ from twolevel.world.provided import PROVIDED_SIGNALS
 from twolevel.world.traffic import RED, YELLOW, TrafficState
 from twolevel.world.world import World
 
-__all__ = ["PROVIDED_SIGNALS", "PASS_MARGIN", "STOP_ZONE", "TrafficLog", "StopMemory", "HorizonConstants", "signals_along",
+__all__ = ["PASS_MARGIN", "STOP_ZONE", "TrafficLog", "StopMemory", "HorizonConstants", "signals_along",
            "horizon_constants", "update_stop_memory"]
 
 PASS_MARGIN = 5.0  # [m] how far past a stop line it still counts (so running it is visible)

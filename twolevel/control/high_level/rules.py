@@ -14,12 +14,13 @@ from twolevel.control.codes import MIL510
 from twolevel.diagnostics import Diagnostic, Span
 from twolevel.stl import analysis, ast
 from twolevel.stl.typecheck import RuleSet
+from twolevel.world.provided import PROVIDED_SIGNALS
 
 __all__ = ["MPC_SIGNALS", "MpcRule", "mpc_rules"]
 
-MPC_SIGNALS = frozenset({"x", "y", "psi", "v", "a", "delta", "s", "e", "v_max", "d_stop", "light_red", "d_light",
-                         "d_lead", "v_lead", "n_near"})
-"""The signals the MPC predicts over its horizon (:mod:`twolevel.control.high_level.problem`)."""
+MPC_SIGNALS = PROVIDED_SIGNALS - {"min_gap"}
+"""The signals the MPC predicts over its horizon (:mod:`twolevel.control.high_level.problem`):
+every provided one but the boxes' separation."""
 
 
 @dataclass(frozen=True, eq=False)
