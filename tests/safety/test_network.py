@@ -8,9 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from safety_worlds import world
-from twolevel.models.obb import box_corners, box_separation
 from twolevel.safety.network import network_of
-from twolevel.safety.polygons import OCTAGON_NORMALS, band_pieces, disc_hull_octagons, intersects, lane_point, rect_axes
+from twolevel.safety.polygons import OCTAGON_NORMALS, band_pieces, disc_hull_octagons, lane_point
 
 
 def lane_ids(w, idx):
@@ -80,19 +79,6 @@ def test_a_band_piece_contains_its_band(which, pick_cell, frac, lat_lo, width, s
     assert np.all((proj >= box.min(0) - 1e-6) & (proj <= box.max(0) + 1e-6))
     assert np.all(np.hypot(*(pts - centre[0]).T) <= radius[0] + 1e-6)
     assert np.all(np.abs(pts - centre[0]) <= extent[0] + 1e-6)
-
-
-boxes = st.tuples(st.floats(-5, 5), st.floats(-5, 5), st.floats(-3.2, 3.2), st.floats(0.5, 6), st.floats(0.3, 3))
-
-
-@settings(max_examples=300, deadline=None)
-@given(boxes, boxes)
-def test_separating_axes_agree_with_the_exact_separation(b1, b2):
-    r1, r2 = box_corners(*b1), box_corners(*b2)
-    sep = float(box_separation(r1, r2))
-    hit = bool(intersects(r1[None], rect_axes(r1[None]), r2[None], rect_axes(r2[None]))[0])
-    if abs(sep) > 1e-6:
-        assert hit == (sep < 0)
 
 
 @settings(max_examples=200, deadline=None)

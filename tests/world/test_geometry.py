@@ -8,7 +8,7 @@ import numpy as np
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from twolevel.world.geometry import LaneSet, box_separation, lane_from_reference, sample_road
+from twolevel.world.geometry import LaneSet, lane_from_reference, sample_road
 from twolevel.world.schema import Road
 
 radius = st.floats(5, 2000)
@@ -82,24 +82,3 @@ def test_lane_lookup_tells_lanes_and_directions_apart() -> None:
     assert list(lane) == [0] or list(lane) == [-1]
     p, h = ls.pose(np.array([0, 1]), np.array([30.0, 30.0]))
     assert np.allclose(p, [[30, -1.75], [70, 1.75]]) and np.allclose(np.cos(h), [1, -1])
-
-
-@given(st.floats(-20, 20), st.floats(-20, 20), st.floats(-math.pi, math.pi), st.floats(-math.pi, math.pi))
-@settings(max_examples=100, deadline=None)
-def test_box_separation_is_symmetric_and_matches_sampled_distance(x, y, p1, p2) -> None:
-    c1, c2 = np.array([0.0, 0.0]), np.array([x, y])
-    d = float(box_separation(c1, p1, 4.22, 1.8, c2, p2, 4.22, 1.8))
-    d2 = float(box_separation(c2, p2, 4.22, 1.8, c1, p1, 4.22, 1.8))
-    assert math.isclose(d, d2, abs_tol=1e-9)
-    assert d <= math.hypot(x, y)  # never more than the centre distance
-    if d > 0:  # compare with a dense sampling of both outlines
-        from twolevel.world.geometry import box_corners
-
-        def outline(c, p):
-            k = box_corners(c, np.array(p), np.array(4.22), np.array(1.8))
-            t = np.linspace(0, 1, 200)[:, None, None]
-            return (k + t * (np.roll(k, -1, axis=0) - k)).reshape(-1, 2)
-
-        a, b = outline(c1, p1), outline(c2, p2)
-        sampled = np.min(np.linalg.norm(a[:, None] - b[None], axis=-1))
-        assert d <= sampled + 1e-9 and sampled - d < 0.05

@@ -1,4 +1,4 @@
-"""Batched sensing equals the world's signal definitions; the fast box separation equals obb's."""
+"""Batched sensing equals the world's signal definitions."""
 
 from __future__ import annotations
 
@@ -10,25 +10,14 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from twolevel.models.obb import box_corners, box_separation
 from twolevel.world.loader import load_scenario
 from twolevel.world.provided import PROVIDED_SIGNALS, SIGNALS
-from twolevel.world.sensing import Memory, others_predicted, rect_separation, sense
+from twolevel.world.sensing import Memory, others_predicted, sense
 from twolevel.world.signals import TrafficLog, signals_along
 from twolevel.world.traffic import TrafficState
 from twolevel.world.world import build_world
 
 ROOT = Path(__file__).resolve().parents[2]
-
-pose = st.tuples(st.floats(-6, 6), st.floats(-6, 6), st.floats(-4, 4), st.floats(0.5, 5), st.floats(0.3, 2.5))
-
-
-@settings(max_examples=400, deadline=None)
-@given(pose, pose)
-def test_rect_separation_equals_obb(a, b) -> None:
-    got = rect_separation(*(np.float64(v) for v in a), *(np.float64(v) for v in b))
-    want = box_separation(box_corners(a[0], a[1], a[2], a[3], a[4]), box_corners(b[0], b[1], b[2], b[3], b[4]))
-    assert abs(float(got) - float(want)) < 1e-9
 
 
 def test_batched_prediction_equals_signals_along() -> None:

@@ -34,7 +34,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from twolevel.safety.polygons import band_pieces, overlaps, rect_axes
+from twolevel.models.obb import box_corners, overlaps, rect_axes
+from twolevel.safety.polygons import band_pieces
 from twolevel.world.world import World
 
 __all__ = ["Network", "LaneTrees", "network_of", "REACH", "CELL_TURN", "CELL_LENGTH", "KINK", "STOP_SIGN", "LIGHT"]
@@ -374,8 +375,6 @@ def _zones(world: World, foreign: np.ndarray) -> np.ndarray:
     s = np.arange(0.0, float(r.s[-1]) + 1e-9, 0.25)
     pts = r.position(s)
     psi = r.heading_at(s)
-    from twolevel.models.obb import box_corners
-
     boxes = box_corners(pts[:, 0], pts[:, 1], psi, world.ego.length, world.ego.width)
     hit = np.zeros(len(s), dtype=bool)
     for i in range(0, len(s), 128):

@@ -1,4 +1,7 @@
-"""Convex polygons for the safety layer: lane pieces, growing discs, and the separating-axis test.
+"""Convex polygons for the safety layer: lane pieces and growing discs.
+
+They are tested against each other and the ego's boxes by the separating-axis test of
+:mod:`twolevel.models.obb` (:func:`~twolevel.models.obb.intersects`).
 
 Everything is vectorised over leading dimensions. A convex polygon is given by its vertices
 (..., V, 2) [m] and the axes (..., A, 2) on which the separating-axis theorem tests it (its edge
@@ -12,8 +15,7 @@ such a test can report an overlap that is not there — never the reverse: the t
   lateral offsets, exactly when the piece is straight and with a proven margin on a bend (see the
   function);
 * :func:`disc_hull_octagons` — the circumscribed regular-octagon of the convex hull of two discs
-  (a growing disc over a time interval);
-* :func:`intersects` — the separating-axis test; :func:`overlaps` for two sets of rectangles.
+  (a growing disc over a time interval).
 """
 
 from __future__ import annotations
@@ -22,8 +24,7 @@ import numpy as np
 
 from twolevel.world.geometry import LaneSet
 
-__all__ = ["band_pieces", "lane_point", "disc_hull_octagons", "edge_axes", "rect_axes", "intersects", "overlaps",
-           "OCTAGON_NORMALS"]
+__all__ = ["band_pieces", "lane_point", "disc_hull_octagons", "OCTAGON_NORMALS"]
 
 OCTAGON_NORMALS = np.stack([np.cos(np.arange(8) * np.pi / 4), np.sin(np.arange(8) * np.pi / 4)], axis=1)
 """The outward normals of the octagons :func:`disc_hull_octagons` builds (8, 2)."""
@@ -116,36 +117,3 @@ def disc_hull_octagons(c0: np.ndarray, r0: np.ndarray, c1: np.ndarray, r1: np.nd
     centre = 0.5 * (c0 + c1)
     half = 0.5 * np.hypot(c1[..., 0] - c0[..., 0], c1[..., 1] - c0[..., 1])
     return np.stack([x, y], axis=-1), centre, half + np.maximum(r0, r1) / np.cos(np.pi / 8)
-
-
-def edge_axes(poly: np.ndarray, count: int) -> np.ndarray:
-    """Unit normals (..., count, 2) of the first ``count`` edges of ordered polygons (..., V, 2)
-    (a rectangle needs 2, an octagon with opposite edges parallel 4)."""
-    e = poly[..., 1:count + 1, :] - poly[..., :count, :]
-    norm = np.linalg.norm(e, axis=-1, keepdims=True)
-    e = np.where(norm > 1e-12, e / np.where(norm > 1e-12, norm, 1.0), np.array([1.0, 0.0]))
-    return np.stack([-e[..., 1], e[..., 0]], axis=-1)
-
-
-def rect_axes(rect: np.ndarray) -> np.ndarray:
-    """The two edge normals (..., 2, 2) of rectangles (..., 4, 2)."""
-    return edge_axes(rect, 2)
-
-
-def intersects(pa: np.ndarray, axa: np.ndarray, pb: np.ndarray, axb: np.ndarray) -> np.ndarray:
-    """Whether the convex hulls of the point sets ``pa`` (..., P, 2) and ``pb`` (..., Q, 2) [m]
-    overlap on every axis of ``axa`` (..., A, 2) and ``axb`` (..., B, 2) (broadcast): False proves
-    them disjoint; True is an overlap when the axes include every edge normal of both."""
-    shape = np.broadcast_shapes(axa.shape[:-2], axb.shape[:-2])
-    axes = np.concatenate([np.broadcast_to(axa, shape + axa.shape[-2:]), np.broadcast_to(axb, shape + axb.shape[-2:])],
-                          axis=-2)
-    ax, ay = axes[..., :, 0:1], axes[..., :, 1:2]  # (..., K, 1)
-    qa = ax * pa[..., None, :, 0] + ay * pa[..., None, :, 1]  # (..., K, P)
-    qb = ax * pb[..., None, :, 0] + ay * pb[..., None, :, 1]
-    return np.all((qa.max(-1) >= qb.min(-1)) & (qb.max(-1) >= qa.min(-1)), axis=-1)
-
-
-def overlaps(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Whether rectangles ``a`` (..., 4, 2) and ``b`` (..., 4, 2) [m] overlap (touching counts),
-    broadcast over the leading dimensions."""
-    return intersects(a, rect_axes(a), b, rect_axes(b))

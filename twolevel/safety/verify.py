@@ -12,7 +12,7 @@ intends for the next control step, and:
 3. predicts the occupancy of every participant that could come near, per time interval, up to
    the fail-safe's standstill (:mod:`twolevel.safety.occupancy`);
 4. checks the ego's swept box over every interval — the intended step, then the fail-safe —
-   against the occupancy of that interval (separating axes, :mod:`twolevel.safety.polygons`;
+   against the occupancy of that interval (separating axes, :mod:`twolevel.models.obb`;
    a bounding-circle filter first);
 5. requires the standstill to be *invariably safe*: the ego's box at rest overlaps no lane other
    than its route's (:attr:`~twolevel.safety.network.Network.foreign`), so nobody may legally
@@ -55,14 +55,13 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from twolevel.models.obb import box_corners
+from twolevel.models.obb import box_corners, intersects, rect_axes
 from twolevel.models.params import VehicleParams
 from twolevel.models.rollout import Backend, rollout
 from twolevel.safety.assumptions import kinds_of
 from twolevel.safety.failsafe import FailSafe, FailSafeSettings, brake_rate, manoeuvres, roll
 from twolevel.safety.network import Network, network_of
 from twolevel.safety.occupancy import Intervals, Occupancy, predict
-from twolevel.safety.polygons import intersects, rect_axes
 from twolevel.world.traffic import TrafficState
 from twolevel.world.world import World
 

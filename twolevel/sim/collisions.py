@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from twolevel.sim.summary import Closest, Collision
-from twolevel.world.sensing import rect_separation
+from twolevel.models.obb import pose_separation
 from twolevel.world.traffic import TrafficState
 from twolevel.world.world import World
 
@@ -60,7 +60,7 @@ class CollisionLog:
                                               + np.hypot(w.parts.length, w.parts.width)))
         hit: dict[int, float] = {}
         if close.size:
-            sep = rect_separation(X, Y, psi, w.ego.length, w.ego.width, traffic.x[close], traffic.y[close],
+            sep = pose_separation(X, Y, psi, w.ego.length, w.ego.width, traffic.x[close], traffic.y[close],
                                   traffic.psi[close], w.parts.length[close], w.parts.width[close])
             hit = {int(i): float(g) for i, g in zip(close, sep) if g < 0}
         for i, g in hit.items():

@@ -13,7 +13,8 @@ from typing import Sequence
 
 import numpy as np
 
-from twolevel.world.geometry import LaneSet, Polyline, box_corners
+from twolevel.models.obb import box_corners
+from twolevel.world.geometry import LaneSet, Polyline
 
 __all__ = ["outside", "box_outside", "lane_edges", "road_band"]
 
@@ -77,7 +78,7 @@ def box_outside(lanes: LaneSet, x: np.ndarray, y: np.ndarray, psi: np.ndarray, l
     once its reference point is."""
     x, y, psi = (np.asarray(c, dtype=float) for c in (x, y, psi))
     centre = np.stack([x, y], axis=-1)
-    corners = box_corners(centre, psi, np.full(x.shape, length), np.full(x.shape, width))  # (N, 4, 2)
+    corners = box_corners(x, y, psi, length, width)  # (N, 4, 2)
     worst = outside(lanes, corners.reshape(-1, 2), only, 0.5 * length).reshape(-1, 4).max(axis=1)
     return worst, outside(lanes, centre)
 

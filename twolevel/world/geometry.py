@@ -20,7 +20,6 @@ from twolevel.world.schema import Road
 
 __all__ = [
     "Polyline", "Lane", "LaneSet", "Route", "sample_road", "lane_from_reference", "concatenate", "resample",
-    "box_corners", "box_separation",
 ]
 
 _SAGITTA = 1e-3  # [m] maximum distance of an arc from its chords
@@ -405,24 +404,3 @@ def resample(line: Polyline, spacing: float) -> tuple[np.ndarray, np.ndarray, np
     s = line.s[0] + np.linspace(0.0, line.length, n + 1)
     mid = 0.5 * (s[:-1] + s[1:])
     return s - line.s[0], line.position(s), line.heading_at(s), line.curvature_at(mid)
-
-
-def box_corners(center: np.ndarray, psi: np.ndarray, length: np.ndarray, width: np.ndarray) -> np.ndarray:
-    """Corners (..., 4, 2) [m] of oriented boxes centred at ``center`` (..., 2) [m]; see
-    :func:`twolevel.models.obb.box_corners` (the one implementation)."""
-    from twolevel.models.obb import box_corners as corners
-
-    center = np.asarray(center, float)
-    return corners(center[..., 0], center[..., 1], psi, length, width)
-
-
-def box_separation(
-    c1: np.ndarray, psi1: np.ndarray, l1: np.ndarray, w1: np.ndarray,
-    c2: np.ndarray, psi2: np.ndarray, l2: np.ndarray, w2: np.ndarray,
-) -> np.ndarray:
-    """Signed separation [m] of oriented boxes given by centre, heading and size, vectorised
-    (broadcasting): the distance between them when apart, minus the penetration depth when they
-    overlap — :func:`twolevel.models.obb.box_separation`, the low level's ``collision_free``."""
-    from twolevel.models.obb import box_separation as separation
-
-    return separation(box_corners(c1, psi1, l1, w1), box_corners(c2, psi2, l2, w2))

@@ -22,11 +22,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from twolevel.models.obb import pose_separation
 from twolevel.world.signals import PASS_MARGIN, STOP_ZONE, StopMemory, update_stop_memory
 from twolevel.world.traffic import RED, YELLOW, TrafficState
 from twolevel.world.world import World
 
-__all__ = ["Memory", "Others", "others_now", "others_predicted", "sense", "rect_separation", "min_box_gap"]
+__all__ = ["Memory", "Others", "others_now", "others_predicted", "sense", "min_box_gap"]
 
 
 @dataclass(frozen=True)
@@ -129,42 +130,6 @@ def others_predicted(world: World, traffic: TrafficState, x: float, y: float, s0
                   np.concatenate([now.e, out.e], axis=1), now.length, now.width, idx)
 
 
-def rect_separation(x1: np.ndarray, y1: np.ndarray, psi1: np.ndarray, l1: np.ndarray | float, w1: np.ndarray | float,
-                    x2: np.ndarray, y2: np.ndarray, psi2: np.ndarray, l2: np.ndarray | float,
-                    w2: np.ndarray | float) -> np.ndarray:
-    """Signed separation [m] of oriented rectangles (centre, heading, length, width), elementwise
-    with broadcasting: the distance between them when apart, minus the smallest overlap of their
-    projections on the four edge normals (SAT) when they overlap — the value of :func:`twolevel.models.obb.box_separation`, computed from
-    poses (corner-to-rectangle distances in each box's frame), several times faster."""
-    c1, s1, c2, s2 = np.cos(psi1), np.sin(psi1), np.cos(psi2), np.sin(psi2)
-    h1, k1, h2, k2 = np.asarray(l1) / 2, np.asarray(w1) / 2, np.asarray(l2) / 2, np.asarray(w2) / 2
-    dx, dy = x2 - x1, y2 - y1
-    # SAT: overlap along the four edge normals
-    depth = None
-    for ax, ay in ((c1, s1), (-s1, c1), (c2, s2), (-s2, c2)):
-        e1 = h1 * np.abs(c1 * ax + s1 * ay) + k1 * np.abs(-s1 * ax + c1 * ay)
-        e2 = h2 * np.abs(c2 * ax + s2 * ay) + k2 * np.abs(-s2 * ax + c2 * ay)
-        ov = np.minimum(e1 + e2 - np.abs(dx * ax + dy * ay), 2 * np.minimum(e1, e2))  # interval overlap
-        depth = ov if depth is None else np.minimum(depth, ov)
-    # apart: the nearest feature pair is a corner of one box and the other box
-    gap = None
-    for (px, py, pc, ps, ph, pk), (qc, qs, qh, qk, sign) in (
-        ((x1, y1, c1, s1, h1, k1), (c2, s2, h2, k2, 1.0)),
-        ((x2, y2, c2, s2, h2, k2), (c1, s1, h1, k1, -1.0)),
-    ):
-        # corner offsets of box p relative to the centre of box q, in q's frame
-        ox, oy = -sign * dx, -sign * dy  # p's centre minus q's centre
-        bx, by = ox * qc + oy * qs, -ox * qs + oy * qc
-        for sx, sy in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
-            cx = sx * ph * pc - sy * pk * ps
-            cy = sx * ph * ps + sy * pk * pc
-            u = bx + cx * qc + cy * qs
-            w = by - cx * qs + cy * qc
-            d = np.hypot(np.maximum(np.abs(u) - qh, 0.0), np.maximum(np.abs(w) - qk, 0.0))
-            gap = d if gap is None else np.minimum(gap, d)
-    return np.where(depth > 0.0, -depth, gap)
-
-
 def min_box_gap(x: np.ndarray, y: np.ndarray, psi: np.ndarray, length: float, width: float, others: Others,
                 near: np.ndarray, dist: np.ndarray) -> np.ndarray:
     """Minimum signed box separation (K, T) [m] between the ego's poses (K, T) and the ``near``
@@ -178,7 +143,7 @@ def min_box_gap(x: np.ndarray, y: np.ndarray, psi: np.ndarray, length: float, wi
     ub = np.where(near, dist - r_in, np.inf).min(axis=-1, keepdims=True)
     pick = near & (dist - r_out <= ub)
     k, t, i = np.nonzero(pick)
-    sep = rect_separation(x[k, t], y[k, t], psi[k, t], length, width, others.x[i, t], others.y[i, t],
+    sep = pose_separation(x[k, t], y[k, t], psi[k, t], length, width, others.x[i, t], others.y[i, t],
                           others.psi[i, t], others.length[i], others.width[i])
     out = np.full((K, T), np.inf)
     np.minimum.at(out, (k, t), sep)

@@ -37,7 +37,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from twolevel.world.geometry import box_separation
+from twolevel.models.obb import box_corners, box_separation
 from twolevel.world.provided import PROVIDED_SIGNALS
 from twolevel.world.traffic import RED, YELLOW, TrafficState
 from twolevel.world.world import World
@@ -159,9 +159,9 @@ def _others(world: World, traffic: TrafficLog | None, x: np.ndarray, y: np.ndarr
     vl = np.zeros(near.shape)
     vl[k, i] = traffic.v[k, i] * along
     out["v_lead"] = np.where(has, vl[r, best], v)
-    sep = box_separation(np.stack([x[k], y[k]], axis=1), psi[k], world.ego.length, world.ego.width,
-                         np.stack([traffic.x[k, i], traffic.y[k, i]], axis=1), traffic.psi[k, i],
-                         traffic.length[i], traffic.width[i])
+    sep = box_separation(box_corners(x[k], y[k], psi[k], world.ego.length, world.ego.width),
+                         box_corners(traffic.x[k, i], traffic.y[k, i], traffic.psi[k, i], traffic.length[i],
+                                     traffic.width[i]))
     mg = np.full(near.shape, np.inf)
     mg[k, i] = sep
     out["min_gap"] = mg.min(axis=1)

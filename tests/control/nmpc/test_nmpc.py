@@ -18,9 +18,9 @@ from twolevel.control.nmpc.nlp import bicycle_step_casadi
 from twolevel.control.planner import Snapshot
 from twolevel.models import bicycle
 from twolevel.models import fourwheel as fw
+from twolevel.models.obb import pose_separation
 from twolevel.models.params import VehicleParams
 from twolevel.models.rollout import rollout_accel
-from twolevel.world.geometry import box_separation
 from twolevel.world.loader import load_scenario
 from twolevel.world.signals import StopMemory, update_stop_memory
 from twolevel.world.world import World, build_world
@@ -171,9 +171,8 @@ def test_keeps_its_distance_to_a_stopped_vehicle(tmp_path: Path) -> None:
     B = 0.5 * (w.parts.width[0] + w.ego.width) + 1.0
     measure = (((c * dx + s_ * dy) / A) ** 4 + ((-s_ * dx + c * dy) / B) ** 4) ** 0.25
     assert np.min(measure) >= 1.0 - 1e-5, np.min(measure)  # the smooth distance held at every step
-    sep = box_separation(xs[:, :2], xs[:, 2], w.ego.length, w.ego.width,
-                         np.repeat(o.xy[:1], len(xs), 0), np.repeat(o.psi[:1], len(xs)),
-                         np.repeat(w.parts.length[:1], len(xs)), np.repeat(w.parts.width[:1], len(xs)))
+    sep = pose_separation(xs[:, 0], xs[:, 1], xs[:, 2], w.ego.length, w.ego.width,
+                          o.x[0], o.y[0], o.psi[0], w.parts.length[0], w.parts.width[0])
     assert np.min(sep) > 0.5  # no contact
     assert xs[-1, 3] < 0.5 or np.max(np.abs(dy)) > 2.0  # stopped behind it, or went around
     assert all(r.ok for r in res)
