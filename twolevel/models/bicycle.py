@@ -13,17 +13,22 @@ the path curvature κ = tan δ / l_f is constant whatever the speed, so the car 
 arc length s = v·dt + a·dt²/2 on a circle of curvature κ:
 ψ⁺ = ψ + κs, v⁺ = v + a·dt and the position moves by the chord s·sinc(κs/2) at the mid-arc
 heading ψ + κs/2. This is exact also when v changes sign (s is then the signed arc length).
-:func:`linearize` differentiates this map analytically for a whole horizon at once.
+:func:`step_columns` writes this map once, for numpy (:func:`step`, :func:`rollout`) and for
+casadi (the NMPC's shooting, :mod:`twolevel.control.nmpc.nlp`); :func:`linearize` differentiates
+it analytically for a whole horizon at once.
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from twolevel.models.ops import NP
 from twolevel.models.params import BicycleParams
 
-__all__ = ["f", "step", "rollout", "linearize", "NX", "NU"]
+__all__ = ["f", "step", "step_columns", "rollout", "linearize", "NX", "NU"]
 
 NX = 4
 NU = 2
@@ -43,29 +48,43 @@ def f(x: ArrayLike, u: ArrayLike, params: BicycleParams = _DEFAULT) -> NDArray[n
     )
 
 
+def _sinc(theta: Any, xp: Any) -> Any:
+    """sin(θ)/θ, its series near θ = 0, in the operations of ``xp``."""
+    small = xp.fabs(theta) < _SMALL
+    th = xp.where(small, 1.0, theta)
+    return xp.where(small, 1.0 - theta**2 / 6.0, xp.sin(th) / th)
+
+
 def _sinc_and_derivative(theta: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """sin(θ)/θ and its derivative (θcosθ − sinθ)/θ², series near θ = 0."""
+    """sin(θ)/θ and its derivative (θcosθ − sinθ)/θ², series near θ = 0 (numpy)."""
     small = np.abs(theta) < _SMALL
     th = np.where(small, 1.0, theta)
     s, c = np.sin(th), np.cos(th)
-    sinc = np.where(small, 1.0 - theta**2 / 6.0, s / th)
+    sinc = np.where(small, 1.0 - theta**2 / 6.0, s / th)  # = _sinc(theta, NP), sharing sin(th)
     dsinc = np.where(small, -theta / 3.0 + theta**3 / 30.0, (th * c - s) / th**2)
     return sinc, dsinc
+
+
+def step_columns(X: Any, Y: Any, psi: Any, v: Any, delta: Any, a: Any, dt: float, l_f: float,
+                 xp: Any = NP) -> tuple[Any, Any, Any, Any]:
+    """The exact zero-order-hold step on columns (one array or symbol per component): state X, Y
+    [m], ψ [rad], v [m/s], input δ [rad], a [m/s²], period ``dt`` [s], ``l_f`` [m] → X⁺, Y⁺, ψ⁺,
+    v⁺. Written once in the operations of ``xp``: numpy's (:data:`~twolevel.models.ops.NP`) for
+    :func:`step`, casadi's (:func:`~twolevel.models.ops.casadi_ops`) for the NMPC's shooting."""
+    kappa = xp.tan(delta) / l_f
+    s = v * dt + 0.5 * a * dt * dt
+    theta = 0.5 * kappa * s
+    g = s * _sinc(theta, xp)
+    phi = psi + theta
+    return X + g * xp.cos(phi), Y + g * xp.sin(phi), psi + 2.0 * theta, v + a * dt
 
 
 def step(x: ArrayLike, u: ArrayLike, dt: float, params: BicycleParams = _DEFAULT) -> NDArray[np.float64]:
     """Exact zero-order-hold step: x (..., 4), u (..., 2), dt [s] → x⁺ (..., 4)."""
     x = np.asarray(x, dtype=float)
     u = np.asarray(u, dtype=float)
-    X, Y, psi, v = x[..., 0], x[..., 1], x[..., 2], x[..., 3]
-    a = u[..., 1]
-    kappa = np.tan(u[..., 0]) / params.l_f
-    s = v * dt + 0.5 * a * dt * dt
-    theta = 0.5 * kappa * s
-    sinc, _ = _sinc_and_derivative(theta)
-    g = s * sinc
-    phi = psi + theta
-    return np.stack([X + g * np.cos(phi), Y + g * np.sin(phi), psi + 2.0 * theta, v + a * dt], axis=-1)
+    return np.stack(step_columns(x[..., 0], x[..., 1], x[..., 2], x[..., 3], u[..., 0], u[..., 1], dt, params.l_f),
+                    axis=-1)
 
 
 def rollout(x0: ArrayLike, us: ArrayLike, dt: float, params: BicycleParams = _DEFAULT) -> NDArray[np.float64]:

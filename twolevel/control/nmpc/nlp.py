@@ -6,8 +6,8 @@ multiple shooting: X_{k+1} = F(X_k, U_k) with X_0 the parameter ``x0``.
 Models (``F`` over one control period dt [s], input held):
 
 * ``"kinematic"`` (nx = 4, [X, Y, ψ, v]): the exact zero-order-hold step of
-  :func:`twolevel.models.bicycle.step`, written again in casadi symbols (same equations, the
-  sinc series near 0 done with ``if_else`` as numpy does with ``where``).
+  :func:`twolevel.models.bicycle.step`, the same equations
+  (:func:`~twolevel.models.bicycle.step_columns`) through the casadi ops.
 * ``"fourwheel"`` (nx = 12, :mod:`twolevel.models.fourwheel`): the detailed model's own
   integrator (:func:`~twolevel.models.fourwheel.substep`, through the casadi ops), ``n``
   internal steps per dt (default the model's ``h_int``, 20 at dt = 0.1 s), a → γ by
@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from twolevel.control.high_level.settings import Weights
+from twolevel.models import bicycle
 from twolevel.models import fourwheel as fw
 from twolevel.models.actuation import gamma_from_accel
 from twolevel.models.ops import casadi_ops
@@ -50,18 +51,11 @@ SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 
 
 def bicycle_step_casadi(x: Any, u: Any, dt: float, l_f: float) -> Any:
-    """:func:`twolevel.models.bicycle.step` in casadi symbols: x (4,), u (2,) → x⁺ (4,)."""
+    """:func:`twolevel.models.bicycle.step` in casadi symbols: x (4,), u (2,) → x⁺ (4,) (the same
+    equations, :func:`~twolevel.models.bicycle.step_columns`, through the casadi ops)."""
     import casadi as ca
 
-    kappa = ca.tan(u[0]) / l_f
-    s = x[3] * dt + 0.5 * u[1] * dt * dt
-    theta = 0.5 * kappa * s
-    small = ca.fabs(theta) < 1e-4
-    th = ca.if_else(small, 1.0, theta)
-    sinc = ca.if_else(small, 1.0 - theta**2 / 6.0, ca.sin(th) / th)
-    g = s * sinc
-    phi = x[2] + theta
-    return ca.vertcat(x[0] + g * ca.cos(phi), x[1] + g * ca.sin(phi), x[2] + 2.0 * theta, x[3] + u[1] * dt)
+    return ca.vertcat(*bicycle.step_columns(x[0], x[1], x[2], x[3], u[0], u[1], dt, l_f, casadi_ops()))
 
 
 def _fourwheel_step_casadi(x: Any, u: Any, dt: float, p: VehicleParams, n: int) -> Any:
