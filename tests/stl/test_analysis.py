@@ -3,14 +3,18 @@
 from __future__ import annotations
 
 import math
+import typing
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from twolevel.stl.analysis import (
     fold_constants, future_horizon, is_linear, nonlinear_nodes, past_depth, signals_read, substitute,
 )
-from twolevel.stl.ast import BoolConst, Compare, Num, Temporal, Var
+from twolevel.stl.ast import (
+    FUTURE_OPS, PAST_OPS, BinaryTemporalOp, BoolConst, Compare, Num, Temporal, UnaryTemporalOp, Var,
+)
 from twolevel.stl.lint import check_source, load_ruleset
 from twolevel.stl.parser import parse
 from twolevel.stl.printer import format_formula
@@ -115,3 +119,30 @@ def test_ruleset_bind_and_inline(tmp_path: Path) -> None:
 def test_library_rules_fold_when_inactive() -> None:
     rs, _ = load_ruleset(str(RULES / "red_light.stl"))
     assert substitute(rs.formula("red_light"), {"light_red": 0.0}) == BoolConst(True)
+
+
+def test_every_temporal_operator_looks_one_way() -> None:
+    """FUTURE_OPS and PAST_OPS split the temporal operators of the grammar, as the offline monitor
+    (the oracle) evaluates them: a future operator's value at a sample changes with later samples
+    only, a past one's with earlier samples only. Every module that asks which way an operator
+    looks reads these two sets."""
+    from twolevel.monitor.robustness import robustness
+
+    ops = set(typing.get_args(UnaryTemporalOp)) | set(typing.get_args(BinaryTemporalOp))
+    assert FUTURE_OPS | PAST_OPS == ops and not FUTURE_OPS & PAST_OPS
+    base = {"a": np.linspace(1.0, -1.0, 11), "b": np.full(11, 0.5)}
+    k = np.arange(11)
+
+    def moves(node, where) -> bool:
+        """Whether the value at sample 5 changes when the samples ``where`` are raised or lowered."""
+        rho = robustness(node, base, 1.0)[5]
+        return any(robustness(node, {n: np.where(where, v, x) for n, x in base.items()}, 1.0)[5] != rho
+                   for v in (-5.0, 5.0))
+
+    for op in sorted(ops):
+        src = (f"{op}(a > 0)" if op in ("next", "prev") else f"(b > 0) {op}[0:2] (a > 0)"
+               if op in typing.get_args(BinaryTemporalOp) else f"{op}[0:2] (a > 0)")
+        node = f(src)
+        assert moves(node, k > 5) == (op in FUTURE_OPS), op
+        assert moves(node, k < 5) == (op in PAST_OPS), op
+        assert (future_horizon(node, 1.0) > 0) == (op in FUTURE_OPS), op

@@ -167,7 +167,7 @@ class Evaluator:
             if op in ("next", "prev"):
                 k = t + 1 if op == "next" else t - 1
                 return self.rob(n.operand, k, s) if 0 <= k < self.signals.length else s * INF
-            past = op in ("historically", "once")
+            past = op in ast.PAST_OPS
             w = self._window(t, n.interval, past)
             if op == "always" and s > 0:
                 fast = vector_always(self.signals, n, w, self.stable)

@@ -15,6 +15,7 @@ import math
 from typing import Callable, Mapping
 
 from twolevel.stl.ast import (
+    FUTURE_OPS,
     Abs,
     Arith,
     BinTemporal,
@@ -65,7 +66,7 @@ def _horizon(node: Node, dt: float, refs: Mapping[str, float], future: bool) -> 
     same = future
     if isinstance(node, Temporal):
         inner = rec(node.operand)
-        ahead = node.op in ("always", "eventually", "next")
+        ahead = node.op in FUTURE_OPS
         if node.op in ("next", "prev"):
             lo = hi = dt
         elif node.interval is None:
@@ -77,7 +78,7 @@ def _horizon(node: Node, dt: float, refs: Mapping[str, float], future: bool) -> 
         return max(0.0, inner - lo)  # looks the other way: only reduces the reach
     if isinstance(node, BinTemporal):
         left, right = rec(node.left), rec(node.right)
-        ahead = node.op in ("until", "unless")
+        ahead = node.op in FUTURE_OPS
         lo, hi = (0.0, math.inf) if node.interval is None else (node.interval.lo, node.interval.hi)
         if ahead == same:
             return hi + max(left, right)

@@ -23,6 +23,7 @@ from twolevel.diagnostics import Diagnostic, Span
 from twolevel.stl import codes
 from twolevel.stl.analysis import fold_term, future_horizon, nonlinear_nodes, overflowing_terms, substitute
 from twolevel.stl.ast import (
+    FUTURE_OPS,
     Abs,
     Arith,
     BinTemporal,
@@ -339,7 +340,7 @@ def typecheck(
             if isinstance(n, (Temporal, BinTemporal)):
                 if n.interval is not None:
                     ck.interval(n.interval)
-                elif n.op in ("always", "eventually", "until", "unless"):
+                elif n.op in FUTURE_OPS and n.op != "next":  # next looks one sample ahead
                     diags.append(codes.STL210(
                         f"unbounded '{n.op}': the rule cannot be decided online or inside the MPC horizon",
                         _span(n, file), hint=f"bound it, e.g. {n.op}[0:1]"))

@@ -55,9 +55,7 @@ def _causal(node: ast.Node) -> bool:
     """No future operator and no built-in that could look beyond the sample: the value at k
     depends on samples ≤ k only."""
     for n in node.walk():
-        if isinstance(n, ast.Temporal) and n.op in ("always", "eventually", "next"):
-            return False
-        if isinstance(n, ast.BinTemporal) and n.op != "since":
+        if isinstance(n, (ast.Temporal, ast.BinTemporal)) and n.op in ast.FUTURE_OPS:
             return False
         if isinstance(n, ast.Call) and n.name not in _POINTWISE_CALLS:
             return False
@@ -78,7 +76,7 @@ def prefix_bounded(node: ast.Node) -> bool:
             return _causal(node.left) and prefix_bounded(node.right)
         return False
     if isinstance(node, ast.Temporal):
-        return node.op in ("always", "next", "historically", "once", "prev") and prefix_bounded(node.operand)
+        return (node.op in ast.PAST_OPS or node.op in ("always", "next")) and prefix_bounded(node.operand)
     if isinstance(node, ast.BinTemporal):
-        return node.op == "since" and prefix_bounded(node.left) and prefix_bounded(node.right)
+        return node.op in ast.PAST_OPS and prefix_bounded(node.left) and prefix_bounded(node.right)
     return False
