@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import ast
+import importlib
 import json
+from pathlib import Path
 
 import pytest
 
@@ -30,6 +33,45 @@ def test_code_call_makes_a_diagnostic_with_default_severity() -> None:
 def test_redeclaring_a_code_differently_is_refused() -> None:
     with pytest.raises(ValueError):
         Code("TST901", "other-name", Severity.INFO, "different")
+
+
+def test_bad_input_is_a_property_of_the_code_and_only_of_errors() -> None:
+    bad = Code("TST903", "test-bad-input", Severity.ERROR, "A bad input used by this test.", bad_input=True)
+    assert bad("m", Span("f")).bad_input
+    assert not bad("m", Span("f"), severity=Severity.WARNING).bad_input  # demoted: a finding
+    assert not TST901("m", Span("f")).bad_input
+    assert not Diagnostic("XXX999", Severity.ERROR, "never declared", Span("f")).bad_input
+
+
+ROOT = Path(__file__).resolve().parents[1] / "twolevel"
+STAGE_PREFIXES = {  # the codes.py of each stage and the codes it may declare
+    "stl": ("STL",), "world": ("YML",), "compiler": ("MIL50",), "control": ("MIL51", "MIL52", "MIL53"),
+    "monitor": ("SIM60",), "sim": ("SIM61",), "verdict": ("SIM62",), "pipeline": ("CLI",),
+}
+
+
+def test_every_code_is_declared_in_its_stage_codes_module() -> None:
+    """Codes are declared only in ``twolevel/<stage>/codes.py``, each with its stage's prefix, and
+    the CLI's and pipeline's exit decisions read ``bad_input`` instead of code prefixes."""
+    outside = []
+    for path in sorted(ROOT.rglob("*.py")):
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        calls = [n for n in ast.walk(tree) if isinstance(n, ast.Call) and isinstance(n.func, ast.Name)
+                 and n.func.id == "Code"]
+        if calls and path.name != "codes.py":
+            outside.append(f"{path.relative_to(ROOT)}:{calls[0].lineno}")
+        prefixes = [n for n in ast.walk(tree) if isinstance(n, ast.Call) and isinstance(n.func, ast.Attribute)
+                    and n.func.attr == "startswith" and isinstance(n.func.value, ast.Attribute)
+                    and n.func.value.attr == "code"]
+        assert not prefixes, f"{path}: a decision by code prefix (declare bad_input on the Code)"
+    assert not outside, outside
+    for stage, allowed in STAGE_PREFIXES.items():
+        module = importlib.import_module(f"twolevel.{stage}.codes")
+        ids = [v.id for v in vars(module).values() if isinstance(v, Code)]
+        assert ids, stage
+        assert all(i.startswith(allowed) for i in ids), (stage, ids)
+    found = {p.parent.name for p in ROOT.rglob("codes.py")}
+    assert found == set(STAGE_PREFIXES), found
 
 
 def test_span_end_never_precedes_start() -> None:

@@ -134,7 +134,7 @@ def check(
         (_console().print(summary, end="") if sys.stdout.isatty() else _emit(summary))
     else:
         _emit(text)
-    if result.unreadable and not exit_zero:
+    if result.bad_input and not exit_zero:
         raise typer.Exit(EXIT_USAGE)
     raise typer.Exit(pipeline.exit_code(result.diagnostics, strict=strict, exit_zero=exit_zero))
 
@@ -236,8 +236,7 @@ def plan(
     _print_diagnostics(diags)
     if report_ is None:
         raise typer.Exit(EXIT_USAGE)
-    # a rule that cannot be encoded (MIL50x) or a model that could not be written (MIL514) is bad input
-    bad_input = any(d.is_error and (d.code.startswith("MIL50") or d.code == "MIL514") for d in diags)
+    bad_input = any(d.bad_input for d in diags)  # e.g. a rule that cannot be encoded, an unwritable --emit
     if output is MonitorFormat.json:
         _emit_json(report_.to_json())
     else:

@@ -106,6 +106,13 @@ class Diagnostic:
     def is_error(self) -> bool:
         return self.severity is Severity.ERROR
 
+    @property
+    def bad_input(self) -> bool:
+        """An error whose code says the command could not use its input at all (exit 2), rather
+        than a finding about the input (exit 1): see :attr:`Code.bad_input`."""
+        code = REGISTRY.get(self.code)
+        return self.is_error and code is not None and code.bad_input
+
 
 REGISTRY: dict[str, "Code"] = {}
 
@@ -117,12 +124,17 @@ class Code:
     >>> STL999 = Code("STL999", "example", Severity.WARNING, "An example.")
     >>> STL999("something odd", Span("a.stl", 2, 3)).code
     'STL999'
+
+    ``bad_input``: an error of this code means the command could not use its input at all (a
+    file that cannot be read, a rule that cannot be encoded, an unknown solver): the CLI exits 2
+    (usage error) on it instead of 1 (a finding). The one place that decides it.
     """
 
     id: str
     name: str
     severity: Severity
     summary: str
+    bad_input: bool = False
 
     def __post_init__(self) -> None:
         known = REGISTRY.get(self.id)

@@ -16,11 +16,12 @@ MIL510 = Code("MIL510", "signal-not-predictable", W,
               "A rule reads a signal the MPC cannot predict over its horizon; the rule is left to the low level.")
 MIL511 = Code("MIL511", "plan-infeasible", E,
               "No plan satisfies every active rule; the rules named conflict (found by dropping rules one at a time).")
-MIL512 = Code("MIL512", "bad-solver", E, "The requested solver is unknown or not installed.")
-MIL513 = Code("MIL513", "bad-plan-time", E, "The requested time is outside the run or the trace cannot give the state at it.")
-MIL514 = Code("MIL514", "emit-failed", E, "The model could not be written to the requested file.")
+MIL512 = Code("MIL512", "bad-solver", E, "The requested solver is unknown or not installed.", bad_input=True)
+MIL513 = Code("MIL513", "bad-plan-time", E, "The requested time is outside the run or the trace cannot give the state at it.",
+              bad_input=True)
+MIL514 = Code("MIL514", "emit-failed", E, "The model could not be written to the requested file.", bad_input=True)
 MIL515 = Code("MIL515", "fallback-plan", W, "The MPC found no plan in time; the previous plan shifted (or braking) is used.")
-MIL516 = Code("MIL516", "bad-trace", E, "The trace file cannot give the ego state at the requested time.")
+MIL516 = Code("MIL516", "bad-trace", E, "The trace file cannot give the ego state at the requested time.", bad_input=True)
 MIL517 = Code("MIL517", "rule-recovering", W,
               "A rule is already violated now by signals known at solve time (e.g. a vehicle cut in closer "
               "than the gap); the MPC requires it from the first step the plan can still change, to recover.")

@@ -96,6 +96,11 @@ class PlanResult:
     diagnostics: tuple[Diagnostic, ...] = ()
     solver: str = "modes"
     """The solve path (modes, highs, gurobi) or ``nmpc-<model>``."""
+    cause: PlanStatus | None = None
+    """Why the MPC fell back: how its solve path ended (:attr:`PlanStatus.INFEASIBLE`, no plan
+    satisfies the rules, or :attr:`PlanStatus.TIME_LIMIT`); None when it did not fall back, when
+    no solve ran (a rule could not be encoded), and for the NMPC (IPOPT's status is in
+    ``message``)."""
 
     @property
     def ok(self) -> bool:

@@ -7,25 +7,17 @@ that need them, so ``twolevel check`` never loads numpy or a solver.
 
 from __future__ import annotations
 
-import functools
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterable, Mapping, Sequence
 
-from twolevel.diagnostics import Code, Diagnostic, Severity, Span
+from twolevel.diagnostics import Diagnostic, Severity, Span
 from twolevel.files import read_text_quietly
+from twolevel.pipeline.codes import CLI001, CLI002, CLI003
 
 RULE_SUFFIXES = (".stl",)
 YAML_SUFFIXES = (".yaml", ".yml")
-
-CLI001 = Code("CLI001", "path-not-found", Severity.ERROR, "A path given on the command line does not exist.")
-CLI002 = Code("CLI002", "unsupported-file", Severity.ERROR, "A file given on the command line is of no kind twolevel checks.")
-CLI003 = Code("CLI003", "nothing-to-check", Severity.WARNING, "A folder given on the command line holds no rule, map or scenario file.")
-
-#: Codes meaning "the input could not be read at all"; the CLI exits 2 on them (usage error).
-UNREADABLE_CODES: frozenset[str] = frozenset({"CLI001", "CLI002"})
-
 
 @dataclass(frozen=True)
 class CheckResult:
@@ -37,20 +29,9 @@ class CheckResult:
     sources: Mapping[str, str] = field(default_factory=dict)
 
     @property
-    def unreadable(self) -> bool:
-        """True when some input could not be read at all (exit code 2)."""
-        codes = _unreadable_codes()
-        return any(d.code in codes for d in self.diagnostics)
-
-
-@functools.cache
-def _unreadable_codes() -> frozenset[str]:
-    """The command line's :data:`UNREADABLE_CODES` and the codes each stage declares for files
-    it could not read at all (its ``UNREADABLE``); gathered once."""
-    from twolevel.stl import codes as stl_codes
-    from twolevel.world import codes as world_codes
-
-    return UNREADABLE_CODES | stl_codes.UNREADABLE | world_codes.UNREADABLE
+    def bad_input(self) -> bool:
+        """True when some input could not be used at all (exit code 2; :attr:`Code.bad_input`)."""
+        return any(d.bad_input for d in self.diagnostics)
 
 
 def collect_paths(paths: Sequence[str]) -> tuple[list[str], list[Diagnostic]]:

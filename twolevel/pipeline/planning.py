@@ -23,6 +23,7 @@ from twolevel.control.codes import MIL511, MIL512, MIL513, MIL514, MIL516
 from twolevel.control.high_level.controller import HighLevelController
 from twolevel.control.high_level.linearisation import StepData
 from twolevel.control.high_level.settings import SOLVERS, MPCSettings
+from twolevel.control.planner import PlanStatus
 from twolevel.diagnostics import Diagnostic, Span
 from twolevel.milp.highs import solve_highs, write_model
 from twolevel.milp.l1_surrogate import l1_surrogate
@@ -189,9 +190,8 @@ def plan_scenario(
             history = signals_along(world, None, past, t0=float(rec["t"][0]), dt=ws.dt)
     res = ctrl.solve(ego, t0, traffic, history)
     conflicts: tuple[str, ...] = ()
-    unencodable = any(d.is_error and d.code.startswith("MIL50") for d in (*diags, *res.diagnostics))
-    timed_out = any(d.code == "MIL515" and "time limit" in d.message for d in res.diagnostics)
-    if not res.ok and not unencodable and not timed_out:
+    bad_input = any(d.bad_input for d in (*diags, *res.diagnostics))
+    if res.cause is PlanStatus.INFEASIBLE and not bad_input:
         # rules conflict only when the problem is infeasible, not when it timed out or a rule
         # could not be encoded (those say so themselves)
         step, past_s, P = ctrl.prepare(ego, t0, traffic, history)

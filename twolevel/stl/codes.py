@@ -12,7 +12,8 @@ from twolevel.diagnostics import Code, Severity
 E, W, I = Severity.ERROR, Severity.WARNING, Severity.INFO
 
 # ----------------------------------------------------------------------------- STL1xx file & syntax
-STL100 = Code("STL100", "unreadable-file", E, "The rule file cannot be read (missing, a directory, not a regular file, no permission).")
+STL100 = Code("STL100", "unreadable-file", E, "The rule file cannot be read (missing, a directory, not a regular file, no permission).",
+              bad_input=True)
 STL101 = Code("STL101", "syntax-error", E, "The text is not valid rule-language syntax.")
 STL102 = Code("STL102", "unexpected-character", E, "A character that no token of the language starts with.")
 STL103 = Code("STL103", "unbalanced-bracket", E, "A '(' or '[' is not closed, or a ')' or ']' closes nothing.")
@@ -62,7 +63,5 @@ ALL: tuple[Code, ...] = (
     STL211, STL212, STL213, STL214, STL215, STL216, STL217, STL218, STL219, STL220, STL221, STL222, STL223,
     STL301, STL302, STL303, STL304, STL305,
 )
-
-UNREADABLE: frozenset[str] = frozenset({STL100.id})
-"""Codes meaning the file could not be read at all: the CLI exits 2 on them (usage error).
-Binary, non-UTF-8, oversized or too deeply nested files were read and are findings (exit 1)."""
+# STL100 is bad input (the CLI exits 2: usage error); binary, non-UTF-8, oversized or too deeply
+# nested files were read and are findings (exit 1).

@@ -10,7 +10,7 @@ from twolevel.diagnostics import Code, Severity
 
 E, W = Severity.ERROR, Severity.WARNING
 
-YML401 = Code("YML401", "file-unreadable", E, "The file does not exist or cannot be read.")
+YML401 = Code("YML401", "file-unreadable", E, "The file does not exist or cannot be read.", bad_input=True)
 YML402 = Code("YML402", "file-too-large", E, "The file is larger than the loader accepts.")
 YML403 = Code("YML403", "binary-file", E, "The file is binary (contains NUL bytes), not YAML text.")
 YML404 = Code("YML404", "not-utf8", E, "The file is not valid UTF-8.")
@@ -40,6 +40,3 @@ YML426 = Code("YML426", "parameter-range-invalid", W, "Some value within a param
 YML427 = Code("YML427", "goal-out-of-reach", W, "The goal cannot be reached within the run (or its deadline) at the speed limits.")
 
 __all__ = [name for name in dir() if name.startswith("YML")]
-
-#: Codes meaning the file could not be read at all: ``twolevel check`` exits 2 on them.
-UNREADABLE: frozenset[str] = frozenset({"YML401"})

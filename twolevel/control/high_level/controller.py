@@ -188,7 +188,8 @@ class HighLevelController:
         model = asm.model
         diags = list(asm.diagnostics)
         att, msg = Attempt(), ""
-        if any(d.is_error for d in asm.diagnostics):
+        encode_error = any(d.is_error for d in asm.diagnostics)
+        if encode_error:
             msg = "; ".join(d.message for d in asm.diagnostics if d.is_error)
         elif asm.encoding.infeasible:
             att, msg = Attempt(certified=True), "a rule is violated by signals known at solve time"
@@ -211,7 +212,7 @@ class HighLevelController:
             diags.append(MIL515(f"t = {step.t:.2f} s: {msg}; fallback: {why}", Span(self.world.name)))
             return PlanResult(PlanStatus.FALLBACK, float("nan"), controls, states, mode, nb, nr, nc, att.qps,
                               att.certified, tm, {}, f"{att.status.value}: {msg}; fallback: {why}", att.gap,
-                              tuple(diags), st.solver)
+                              tuple(diags), st.solver, None if encode_error else att.status)
         x = att.x
         states = np.vstack([step.x0[None], x[asm.layout.x]])
         controls = x[asm.layout.u]
