@@ -319,6 +319,7 @@ def simulate(
     from pathlib import Path
 
     from twolevel.sim.engine import simulate_scenario
+    from twolevel.sim.trace import RunStatus
 
     run_dir = out or str(Path("runs") / Path(scenario).stem)
     ctrl = controller if controller != "nmpc" or nmpc_model == "kinematic" else f"nmpc-{nmpc_model}"
@@ -353,7 +354,7 @@ def simulate(
     if verdict is not None:
         console.print(_criteria_table(verdict))
     console.print(f"trace: {Path(summary.run_dir) / 'trace.csv'}   report: twolevel report {summary.run_dir}", markup=False)
-    if summary.status != "complete" or verdict is None:
+    if summary.status is not RunStatus.COMPLETE or verdict is None:
         raise typer.Exit(EXIT_USAGE)
     raise typer.Exit(EXIT_OK if verdict.passed else EXIT_FAIL)
 

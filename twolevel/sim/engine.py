@@ -73,7 +73,7 @@ from twolevel.sim.history import History
 from twolevel.sim.provenance import run_metadata
 from twolevel.sim.robustness import RuleColumns
 from twolevel.sim.summary import Collision, RunSummary, StepInfo, summarise
-from twolevel.sim.trace import BASE_COLUMNS, RUN_FILE, TraceWriter, write_json_atomic
+from twolevel.sim.trace import BASE_COLUMNS, RUN_FILE, RunStatus, TraceWriter, write_json_atomic
 from twolevel.stl.typecheck import RuleSet
 from twolevel.world import traffic as tr
 from twolevel.world.loader import Scenario, load_scenario
@@ -287,7 +287,7 @@ class ClosedLoop:
         """Every step into ``out_dir``; the summary and the diagnostics (see :func:`simulate_scenario`)."""
         rule_names = [r.name for r in self.rules]
         columns = list(BASE_COLUMNS) + list(SIGNAL_COLUMNS) + list(EXTRA_COLUMNS) + [f"rob_{n}" for n in rule_names]
-        status, error = "complete", ""
+        status, error, unwritable = RunStatus.COMPLETE, "", False
         self.t_wall0 = time.perf_counter()
         fw_writer = None
         try:
@@ -300,31 +300,31 @@ class ClosedLoop:
                     self._steps(progress, writer, fw_writer)
                 except BaseException:
                     self.columns.finish(writer)
-                    writer.meta["summary"] = self._summary(out_dir, "interrupted").to_json()
+                    writer.meta["summary"] = self._summary(out_dir, RunStatus.INTERRUPTED).to_json()
                     raise
                 self.columns.finish(writer)
-                writer.meta["summary"] = self._summary(out_dir, "complete").to_json()
+                writer.meta["summary"] = self._summary(out_dir, RunStatus.COMPLETE).to_json()
         except KeyboardInterrupt:
-            status = "interrupted"
+            status = RunStatus.INTERRUPTED
         except OSError as exc:  # the disk is full, or the run directory went away
-            status, error = "unwritable", f"{type(exc).__name__}: {exc}"
+            status, error, unwritable = RunStatus.CRASHED, f"{type(exc).__name__}: {exc}", True
         except Exception as exc:  # an internal error: keep the run, say what happened
-            status, error = "crashed", f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}"
+            status, error = RunStatus.CRASHED, f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}"
         finally:
             if fw_writer is not None:
                 try:
                     fw_writer.close()
                 except OSError as exc:
-                    status, error = "unwritable", error or f"{type(exc).__name__}: {exc}"
-        summary = self._summary(out_dir, "crashed" if status == "unwritable" else status)
+                    status, error, unwritable = RunStatus.CRASHED, error or f"{type(exc).__name__}: {exc}", True
+        summary = self._summary(out_dir, status)
         where = Span.whole_file(self.scn.path)
-        if status == "unwritable":
+        if unwritable:
             diags.append(SIM615(f"cannot write the run directory {out_dir}: {error}", where,
                                 hint="free disk space or choose another --out; the steps written so far are kept"))
-        elif status == "interrupted":
+        elif status is RunStatus.INTERRUPTED:
             diags.append(SIM612(f"interrupted after {summary.steps} steps ({summary.duration:g} s)", where,
                                 hint=f"the completed steps are in {out_dir}"))
-        elif status == "crashed":
+        elif status is RunStatus.CRASHED:
             diags.append(SIM613(f"the run stopped after {summary.steps} steps: {error.splitlines()[0]}", where,
                                 hint=f"the completed steps are in {out_dir}; run.json has the traceback"))
             try:
@@ -339,7 +339,7 @@ class ClosedLoop:
                                 f"overlap {-c.gap:.2f} m", where))
         return summary, diags
 
-    def _summary(self, out_dir: str, status: str) -> RunSummary:
+    def _summary(self, out_dir: str, status: RunStatus) -> RunSummary:
         st = self.stats
         n = len(st)
         rob = {k: np.asarray(v[:n]) for k, v in self.columns.robustness.items()}

@@ -12,6 +12,8 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from twolevel.sim.trace import RunStatus
+
 __all__ = ["StepInfo", "Collision", "Closest", "RuleViolations", "RunSummary", "summarise", "jsonable"]
 
 #: Which controller level each decision belongs to (as the report counts them).
@@ -84,7 +86,7 @@ class RunSummary:
 
     scenario: str
     run_dir: str
-    status: str
+    status: RunStatus
     monitor: bool
     controller: str
     seed: int
@@ -127,6 +129,8 @@ def jsonable(value: Any) -> Any:
         return {str(k): jsonable(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
         return [jsonable(v) for v in value]
+    if isinstance(value, str):
+        return str(value)  # a status enum as its plain value
     if isinstance(value, (bool, np.bool_)):
         return bool(value)
     if isinstance(value, (int, np.integer)):
@@ -146,7 +150,7 @@ def _pct(a: np.ndarray, q: float) -> float:
 
 
 def summarise(
-    *, scenario: str, run_dir: str, status: str, monitor: bool, controller: str, seed: int, dt: float,
+    *, scenario: str, run_dir: str, status: RunStatus, monitor: bool, controller: str, seed: int, dt: float,
     wall_time_s: float, step_ms: Sequence[float], high_ms: Sequence[float], low_ms: Sequence[float],
     tracking: Sequence[float], over_limit: Sequence[float], min_dist: Sequence[float], min_gap: Sequence[float],
     decisions: Sequence[str], collisions: Sequence[Collision], robustness: Mapping[str, np.ndarray],

@@ -20,8 +20,9 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from twolevel.atomic import write_json_atomic
+from twolevel.milp.solution import ValueEnum
 
-__all__ = ["BASE_COLUMNS", "TEXT_COLUMNS", "TraceWriter", "RunData", "read_run", "write_json_atomic"]
+__all__ = ["BASE_COLUMNS", "TEXT_COLUMNS", "RunStatus", "TraceWriter", "RunData", "read_run", "write_json_atomic"]
 
 TRACE_FILE = "trace.csv"
 RUN_FILE = "run.json"
@@ -67,6 +68,20 @@ def _cell(value: Any) -> str:
     return repr(f)
 
 
+class RunStatus(ValueEnum):
+    """How a run ended, as ``run.json`` records it (``status``)."""
+
+    RUNNING = "running"
+    """Written at the start: a reader that still finds it knows the run did not end cleanly."""
+    COMPLETE = "complete"
+    """Every step ran (to the scenario's duration, or the goal)."""
+    INTERRUPTED = "interrupted"
+    """Stopped by the user (Ctrl-C); every completed step is kept."""
+    CRASHED = "crashed"
+    """Stopped on an internal error, or the run directory could not be written; the completed
+    steps are kept and ``error`` says why."""
+
+
 class TraceWriter:
     """Append one CSV row per simulation step; keep ``run.json`` current.
 
@@ -98,7 +113,7 @@ class TraceWriter:
         self._fh = open(self.run_dir / TRACE_FILE, "w", encoding="utf-8", newline="")
         self._fh.write(",".join(self.columns) + "\n")
         self._fh.flush()
-        self._write_meta("running")
+        self._write_meta(RunStatus.RUNNING)
 
     def write(self, row: Mapping[str, Any]) -> None:
         """Append one step. Missing columns are written empty; unknown keys are an error."""
@@ -112,7 +127,7 @@ class TraceWriter:
         if self.rows % self._flush_every == 0:
             self._fh.flush()
 
-    def close(self, status: str = "complete", summary: Mapping[str, Any] | None = None) -> None:
+    def close(self, status: RunStatus = RunStatus.COMPLETE, summary: Mapping[str, Any] | None = None) -> None:
         """Flush the trace and record the final status (and summary) in ``run.json``."""
         if self._fh.closed:
             return
@@ -123,8 +138,8 @@ class TraceWriter:
             self.meta["summary"] = dict(summary)
         self._write_meta(status)
 
-    def _write_meta(self, status: str) -> None:
-        self.meta["status"] = status
+    def _write_meta(self, status: RunStatus) -> None:
+        self.meta["status"] = RunStatus(status).value
         self.meta["rows"] = self.rows
         self.meta["wall_time_s"] = round(time.time() - self._started, 3)
         write_json_atomic(self.run_dir / RUN_FILE, self.meta)
@@ -134,13 +149,13 @@ class TraceWriter:
 
     def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
         if exc_type is None:
-            self.close("complete", self.meta.get("summary"))
+            self.close(RunStatus.COMPLETE, self.meta.get("summary"))
         elif issubclass(exc_type, KeyboardInterrupt):
             self.meta["error"] = "interrupted by the user (Ctrl-C)"
-            self.close("interrupted", self.meta.get("summary"))
+            self.close(RunStatus.INTERRUPTED, self.meta.get("summary"))
         else:
             self.meta["error"] = f"{exc_type.__name__}: {exc}"
-            self.close("crashed", self.meta.get("summary"))
+            self.close(RunStatus.CRASHED, self.meta.get("summary"))
 
 
 def _remove_stale_report(run_dir: Path) -> None:
@@ -189,7 +204,7 @@ def read_run(run_dir: str | os.PathLike[str]) -> RunData:
             problems.append(f"{run_file}: unreadable ({exc})")
     else:
         problems.append(f"{run_file} is missing: settings and summary unknown")
-    if meta.get("status") not in (None, "complete"):
+    if meta.get("status") not in (None, RunStatus.COMPLETE):
         problems.append(f"the run ended '{meta.get('status')}' after {meta.get('rows', '?')} steps: {meta.get('error', 'no reason recorded')}")
     trace_file = run_dir / TRACE_FILE
     columns: dict[str, Any] = {}
