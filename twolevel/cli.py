@@ -267,7 +267,7 @@ def plan(
         console.print(_table("solve", facts))
     if bad_input:
         raise typer.Exit(EXIT_USAGE)
-    raise typer.Exit(EXIT_OK if report_.status in ("optimal", "feasible") else EXIT_FAIL)
+    raise typer.Exit(EXIT_OK if report_.status.ok else EXIT_FAIL)
 
 
 def _summary_rows(s) -> list[tuple[str, str]]:  # noqa: ANN001 - RunSummary, imported lazily

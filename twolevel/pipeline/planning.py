@@ -43,7 +43,7 @@ class PlanReport:
     rows (t [s], X [m], Y [m], ψ [rad], v [m/s], δ [rad], a [m/s²]; the last state has no
     control: δ, a repeat the last), each rule's robustness, and the conflicting rules if any."""
 
-    status: str
+    status: PlanStatus
     objective: float
     solve_ms: dict[str, float]
     binaries: int
@@ -66,7 +66,7 @@ class PlanReport:
             return float(v) if math.isfinite(v) else None
 
         out: dict[str, Any] = {
-            "status": self.status,
+            "status": self.status.value,
             "objective": num(self.objective),
             "solve_ms": {k: round(v, 4) for k, v in self.solve_ms.items()},
             "binaries": self.binaries,
@@ -212,7 +212,7 @@ def plan_scenario(
     H, dt = ctrl.settings.H, ctrl.settings.dt
     controls = np.vstack([res.controls, res.controls[-1:]])
     plan = tuple((t0 + k * dt, *map(float, res.states[k]), *map(float, controls[k])) for k in range(H + 1))
-    report = PlanReport(res.status.value, res.cost, dict(res.timings_ms), res.binaries, res.rows, res.columns, plan,
+    report = PlanReport(res.status, res.cost, dict(res.timings_ms), res.binaries, res.rows, res.columns, plan,
                         tuple(res.rule_robustness.items()), solver, res.qps, res.certified, conflicts, res.message,
                         emitted)
     return report, diags + [d for d in res.diagnostics if d not in diags]
