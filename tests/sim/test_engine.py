@@ -11,7 +11,10 @@ import pytest
 
 from twolevel.monitor.tracefile import monitor_trace, read_trace
 from twolevel.sim.engine import TIMING_COLUMNS, simulate_scenario
-from twolevel.sim.summary import StepInfo
+from twolevel.control.high_level.controller import HighLevelController
+from twolevel.control.low_level.decision import Action
+from twolevel.control.nmpc.controller import NmpcController
+from twolevel.sim.summary import LEVEL, LEVELS, StepDecision, StepInfo
 from twolevel.sim.trace import read_run
 from twolevel.stl.parser import parse
 
@@ -297,3 +300,13 @@ def test_dense_traffic_needs_no_braking_from_the_monitor(tmp_path: Path) -> None
     assert not any(v.rule == "no_collision" and v.steps for v in summary.violations)
     run = read_run(tmp_path / "run")
     assert np.all(run.columns["rob_no_collision"] >= 0)
+
+
+def test_every_action_and_planner_label_is_a_trace_decision_with_a_level() -> None:
+    """The trace's decisions are one vocabulary: the low level's actions, the planners' labels
+    (unchecked steps without the monitor) and the fallback, each at one level of the report."""
+    values = {d.value for d in StepDecision}
+    assert {a.value for a in Action} <= values
+    assert {HighLevelController.label, NmpcController.label} <= values
+    assert set(LEVEL) == values and set(LEVEL.values()) == set(LEVELS)
+    assert StepDecision(Action.BRAKE).level == "low" and StepDecision("fallback").level == "high"

@@ -27,6 +27,8 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from twolevel.sim.summary import LEVEL as _LEVEL
+from twolevel.sim.summary import LEVELS as _LEVELS
+from twolevel.sim.summary import StepDecision
 from twolevel.sim.summary import jsonable as _jsonable
 from twolevel.sim.trace import RunData
 
@@ -34,10 +36,10 @@ from twolevel.sim.trace import RunData
 COLLISION_LINE_M = 4.22
 #: The paper's real-time requirement: one control step within 100 ms (10 Hz).
 STEP_BUDGET_MS = 100.0
-DECISIONS: tuple[str, ...] = ("mpc", "sampled", "least_violation", "brake", "fallback", "nmpc")
+DECISIONS: tuple[str, ...] = tuple(d.value for d in StepDecision)
 #: Which part of the controller chose the applied control, per decision (one table: the simulator's).
 DECISION_LEVEL: Mapping[str, str] = _LEVEL
-LEVELS: tuple[str, ...] = ("high", "low", "nmpc")
+LEVELS: tuple[str, ...] = _LEVELS
 LIGHT_STATES: tuple[str, ...] = ("none", "green", "yellow", "red")
 RULE_PREFIX = "rob_"
 

@@ -72,7 +72,7 @@ from twolevel.sim.frames import FrameWriter
 from twolevel.sim.history import History
 from twolevel.sim.provenance import run_metadata
 from twolevel.sim.robustness import RuleColumns
-from twolevel.sim.summary import Collision, RunSummary, StepInfo, summarise
+from twolevel.sim.summary import Collision, RunSummary, StepDecision, StepInfo, summarise
 from twolevel.sim.trace import BASE_COLUMNS, RUN_FILE, RunStatus, TraceWriter, write_json_atomic
 from twolevel.stl.typecheck import RuleSet
 from twolevel.world import traffic as tr
@@ -189,7 +189,7 @@ class Applied:
 
     control: np.ndarray
     accel: float
-    decision: str
+    decision: StepDecision
     candidates: int
     violated: str
 
@@ -229,13 +229,13 @@ class LoopStats:
     """Centre distance to the nearest vehicle [m]."""
     min_gap: list[float] = field(default_factory=list)
     """Box separation to the nearest vehicle [m]."""
-    decisions: list[str] = field(default_factory=list)
+    decisions: list[StepDecision] = field(default_factory=list)
 
     def __len__(self) -> int:
         return len(self.step_ms)
 
     def add(self, times: StepTimes, tracking: float, over_limit: float, min_dist: float, min_gap: float,
-            decision: str) -> None:
+            decision: StepDecision) -> None:
         self.step_ms.append(times.step)
         self.high_ms.append(times.high)
         self.low_ms.append(times.low)
@@ -254,6 +254,7 @@ class ClosedLoop:
                  controller: str) -> None:
         self.world, self.scn, self.planner = world, scn, planner
         self.monitor, self.controller = monitor, controller
+        self.label = StepDecision(planner.label)  # the decision of its unchecked steps (no monitor)
         self.rulesets = rulesets
         self.rules: list[RuleCheck]
         self.rules, self.consts = rule_checks(rulesets, world.settings.dt)
@@ -432,14 +433,14 @@ class ClosedLoop:
         if self.monitor:
             dec = self.low.decide(x, u_star, sensed.t, sensed.traffic, sensed.memory, sensed.s0, sensed.past,
                                   target=plan.states, step=sensed.k, now=sensed.others)
-            control, accel, decision, tried = dec.control, dec.accel, dec.decision.value, dec.candidates
+            control, accel, decision, tried = dec.control, dec.accel, StepDecision(dec.decision), dec.candidates
             why = " ".join(dec.violated)
         else:
             why = ""
             control = np.array([u_star[0, 0], float(gamma_from_accel(u_star[0, 1], max(x[3], 0.0), self.params))])
-            accel, decision, tried = float(u_star[0, 1]), self.planner.label, 0
-        if decision == "mpc" and plan.status is PlanStatus.FALLBACK:
-            decision = "fallback"
+            accel, decision, tried = float(u_star[0, 1]), self.label, 0
+        if decision is StepDecision.MPC and plan.status is PlanStatus.FALLBACK:
+            decision = StepDecision.FALLBACK
         return Applied(control, float(accel), decision, tried, why)
 
     def advance(self, sensed: Sensed, applied: Applied) -> tuple[LoopState, float]:

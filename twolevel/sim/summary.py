@@ -12,12 +12,38 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from twolevel.milp.solution import ValueEnum
 from twolevel.sim.trace import RunStatus
 
-__all__ = ["StepInfo", "Collision", "Closest", "RuleViolations", "RunSummary", "summarise", "jsonable"]
+__all__ = ["StepDecision", "LEVELS", "LEVEL", "StepInfo", "Collision", "Closest", "RuleViolations", "RunSummary", "summarise", "jsonable"]
 
-#: Which controller level each decision belongs to (as the report counts them).
-LEVEL = {"mpc": "high", "fallback": "high", "sampled": "low", "brake": "low", "least_violation": "low", "nmpc": "nmpc"}
+class StepDecision(ValueEnum):
+    """The trace's ``decision``: whose control a step applied. With the monitor, the low level's
+    :class:`~twolevel.control.low_level.decision.Action` (same values); without it, the planner's
+    first control under the planner's ``label``; ``fallback`` when that was the MPC's fallback
+    plan. Every action and every planner label must be a member (a test checks it)."""
+
+    MPC = "mpc"
+    SAMPLED = "sampled"
+    LEAST_VIOLATION = "least_violation"
+    BRAKE = "brake"
+    FALLBACK = "fallback"
+    NMPC = "nmpc"
+
+    @property
+    def level(self) -> str:
+        """Which part of the controller chose the control: ``high``, ``low`` or ``nmpc``."""
+        return _LEVEL_OF[self]
+
+
+_LEVEL_OF = {StepDecision.MPC: "high", StepDecision.FALLBACK: "high", StepDecision.SAMPLED: "low",
+             StepDecision.BRAKE: "low", StepDecision.LEAST_VIOLATION: "low", StepDecision.NMPC: "nmpc"}
+
+LEVELS: tuple[str, ...] = ("high", "low", "nmpc")
+"""The levels, in the order the report lists them."""
+
+LEVEL: Mapping[str, str] = {d.value: d.level for d in StepDecision}
+"""Decision → level, by the decision's text (as the report reads it from a trace)."""
 
 
 @dataclass(frozen=True)
@@ -34,7 +60,7 @@ class StepInfo:
     rate_hz: float
     step_ms: float
     n_near: int
-    decision: str
+    decision: StepDecision
     realtime: float
 
 
@@ -153,7 +179,7 @@ def summarise(
     *, scenario: str, run_dir: str, status: RunStatus, monitor: bool, controller: str, seed: int, dt: float,
     wall_time_s: float, step_ms: Sequence[float], high_ms: Sequence[float], low_ms: Sequence[float],
     tracking: Sequence[float], over_limit: Sequence[float], min_dist: Sequence[float], min_gap: Sequence[float],
-    decisions: Sequence[str], collisions: Sequence[Collision], robustness: Mapping[str, np.ndarray],
+    decisions: Sequence[StepDecision], collisions: Sequence[Collision], robustness: Mapping[str, np.ndarray],
     closest: Sequence[Closest] = (), budget_ms: float = 100.0, goal_reached_t: float | None = None,
 ) -> RunSummary:
     """The summary of the steps recorded so far."""
