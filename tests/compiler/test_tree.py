@@ -11,12 +11,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from milp_systems import DT, H, PAST, T, double_integrator, random_formula
-from twolevel.compiler.block import Block
 from twolevel.compiler.collision import collision_free_builtin, reachable_box
 from twolevel.compiler.driver import encode
 from twolevel.compiler.evaluator import Evaluator
 from twolevel.compiler.signals import AffineSignal, TraceSignals
-from twolevel.compiler.tree import INF, Box, IntervalBounds, Lin, Op, Tree
+from twolevel.compiler.tree import INF, Block, Box, IntervalBounds, Lin, Op, Tree
 from twolevel.compiler.types import Requirement
 from twolevel.milp.builder import ModelBuilder
 from twolevel.stl import ast

@@ -8,8 +8,9 @@ The stages and what they exchange:
   variables) and the table of one trace (:class:`TraceSignals`)
 * ``evaluator.py`` — stage 1: a formula at one trace step → its robustness tree
 * ``tree.py`` — the robustness tree, the intermediate representation (its invariants,
-  producers and consumers are documented there), interval bounds, sharing
-* ``block.py`` — the block protocol: vectorised leaves of the tree and the row sink
+  producers and consumers are documented there), its vectorised leaves (the block protocol),
+  interval bounds, sharing
+* ``sink.py`` — the row sink a block emits into (implemented by stage 2)
 * ``affine_block.py`` — ``always`` over linear predicates as one block
 * ``collision.py`` — the ``collision_free(d)`` built-in and its block; reachable boxes
 * ``emitter.py`` — stage 2: a tree required above a margin → rows, big-M from bounds,

@@ -3,7 +3,7 @@
 ``always[0:1] (v <= v_max + tol)`` at one step is the ``min`` over the window of affine
 expressions of the decision variables: one dense row per (predicate, step) over the signals'
 columns, built with array arithmetic instead of one tree leaf per step. :class:`AffineBlock` is a
-:class:`~twolevel.compiler.block.Block`: rows always true are dropped and rows false by constants
+:class:`~twolevel.compiler.tree.Block`: rows always true are dropped and rows false by constants
 fail the requirement exactly as the generic path does; under a guard each row gets its big-M
 from the variable bounds. :func:`vector_always` is stage 1's fast path: anything else (other
 operators, non-linear terms, negation) returns ``None`` and the generic evaluation takes over.
@@ -13,9 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from twolevel.compiler.block import Block, RowSink
+from twolevel.compiler.sink import RowSink
 from twolevel.compiler.signals import TraceSignals
-from twolevel.compiler.tree import Tree, lin, mk
+from twolevel.compiler.tree import Block, Tree, lin, mk
 from twolevel.stl import ast
 
 __all__ = ["AffineBlock", "vector_always"]

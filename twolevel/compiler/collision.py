@@ -5,7 +5,7 @@ diamond around its constant-velocity prediction). Vehicle–step pairs whose lea
 from the ego's position box is at least d, and faces that can never hold, are removed exactly by
 the compiler's interval pruning, given the ego's position bounds (reachable boxes). Where the
 ego's position is one column per coordinate, the pairs of a trace are one
-:class:`CollisionBlock` (a :class:`~twolevel.compiler.block.Block`), emitted by a few array
+:class:`CollisionBlock` (a :class:`~twolevel.compiler.tree.Block`), emitted by a few array
 operations.
 """
 
@@ -16,10 +16,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from twolevel.compiler.block import Block, RowSink
+from twolevel.compiler.sink import RowSink
 from twolevel.compiler.codes import MIL501, MIL504, EncodeError, span_of
 from twolevel.compiler.signals import TraceSignals
-from twolevel.compiler.tree import INF, Lin, Op, Tree, add, lin, mk, scale
+from twolevel.compiler.tree import INF, Block, Lin, Op, Tree, add, lin, mk, scale
 from twolevel.compiler.types import Builtin, BuiltinContext
 from twolevel.stl import ast
 

@@ -7,7 +7,7 @@ the interval bounds of the row over the columns' bounds (never a blanket constan
 that can never hold (upper bound below the margin) is dropped; one that always holds removes
 its disjunction. A node with two or more parents (:class:`~twolevel.compiler.tree.Parents`) is
 encoded once, through a variable ``z ≤ robustness``. Blocks emit themselves through the
-:class:`~twolevel.compiler.block.RowSink` this class implements. Rows are collected as arrays
+:class:`~twolevel.compiler.sink.RowSink` this class implements. Rows are collected as arrays
 and go into the builder as one block at :meth:`RowEmitter.flush`.
 """
 
@@ -18,9 +18,8 @@ from typing import Sequence
 
 import numpy as np
 
-from twolevel.compiler.block import Block
 from twolevel.compiler.codes import MIL502, NOWHERE, EncodeError
-from twolevel.compiler.tree import INF, IntervalBounds, Lin, Op, Parents, Tree, negate
+from twolevel.compiler.tree import INF, Block, IntervalBounds, Lin, Op, Parents, Tree, negate
 from twolevel.compiler.types import Emission, PendingDisjunction
 from twolevel.milp.builder import ModelBuilder
 from twolevel.milp.model import Disjunction

@@ -16,8 +16,8 @@ A tree (:data:`Tree`) is one of
 * ``float`` — a constant known at solve time; ``+inf`` holds always, ``−inf`` never;
 * :class:`Lin` — ``Σ val_i · x[idx_i] + c``, affine in the decision variables ``x``;
 * :class:`Op` — the ``min`` or ``max`` of two or more children;
-* :class:`~twolevel.compiler.block.Block` — a vectorised leaf: a whole family of min/max
-  structure held in arrays (see :mod:`twolevel.compiler.block`).
+* :class:`Block` — a vectorised leaf: a whole family of min/max structure held in arrays,
+  emitted through a :class:`~twolevel.compiler.sink.RowSink` (the block protocol: see the class).
 
 Invariants, kept by building trees only through :func:`lin`, :func:`mk`, :func:`add` and
 :func:`scale`:
@@ -41,13 +41,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Protocol, Union
+from typing import ClassVar, Protocol, Union
 
 import numpy as np
 
-from twolevel.compiler.block import Block
+from twolevel.compiler.sink import RowSink
 
-__all__ = ["INF", "Lin", "Op", "Tree", "lin", "mk", "add", "scale", "negate",
+__all__ = ["INF", "Lin", "Op", "Block", "Tree", "lin", "mk", "add", "scale", "negate",
            "ColumnBounds", "Box", "IntervalBounds", "Parents"]
 
 INF = math.inf
@@ -82,6 +82,57 @@ class Op:
 
     def __repr__(self) -> str:
         return f"{'max' if self.is_max else 'min'}{self.kids}"
+
+
+class Block:
+    """A vectorised leaf of the robustness tree: the block protocol.
+
+    A block stands for a whole family of min/max structure held in arrays, so that a rule over the
+    horizon and twenty vehicles is bounded and emitted by a few numpy calls instead of a tree of
+    thousands of nodes. Two kinds exist:
+
+    * :class:`~twolevel.compiler.affine_block.AffineBlock` — ``always`` over a conjunction of linear
+      predicates: one row per (predicate, step);
+    * :class:`~twolevel.compiler.collision.CollisionBlock` — ``collision_free(d)``: one
+      max-of-four-faces per vehicle–step pair.
+
+    A block is a leaf of the :data:`Tree` whose value is the ``min`` over its pieces. It is produced by stage 1 (:class:`~twolevel.compiler.evaluator.Evaluator` and the
+    built-ins it calls) and lowered by stage 2 (:class:`~twolevel.compiler.emitter.RowEmitter`,
+    which implements :class:`~twolevel.compiler.sink.RowSink`). A subclass gives:
+
+    * :meth:`Block.bounds` — interval bounds over the column box ``lb ≤ x ≤ ub``;
+    * :meth:`Block.expand` — the equivalent plain tree (used when the block is negated, scaled, added
+      to, or required above a margin that is not a constant);
+    * :meth:`Block.merge` — the ``min`` of several blocks of its type as one block;
+    * :meth:`Block.emit` — the rows for ``block ≥ margin`` whenever ``x[guard] = 1`` (always when
+      ``guard`` is −1), through the sink only, encoding exactly what :meth:`expand` would:
+      pieces that always hold are dropped, pieces that can never hold fail the requirement, big-M
+      comes from the bounds. In stable mode at top level (``sink.stable`` and ``guard < 0``) it emits
+      a structure that does not depend on the current values (redundant rows kept) and records it
+      with ``RowSink.record``, so that :mod:`twolevel.control.high_level.template` can later rewrite the
+      values in place;
+    * :attr:`Block.kind` — its name in those records.
+    """
+
+    __slots__ = ()
+    kind: ClassVar[str] = "?"
+
+    def bounds(self, lb: np.ndarray, ub: np.ndarray) -> tuple[float, float]:
+        """(lowest, highest) value over the column box ``lb ≤ x ≤ ub``."""
+        raise NotImplementedError
+
+    def expand(self) -> Tree:
+        """The equivalent plain tree."""
+        raise NotImplementedError
+
+    @classmethod
+    def merge(cls, blocks: list[Block]) -> Block:
+        """The ``min`` of ``blocks`` (all of this type) as one block."""
+        raise NotImplementedError
+
+    def emit(self, sink: RowSink, margin: float, guard: int) -> None:
+        """Rows for ``self ≥ margin`` whenever ``x[guard] = 1`` (always when ``guard`` is −1)."""
+        raise NotImplementedError
 
 
 Tree = Union[float, Lin, Op, Block]

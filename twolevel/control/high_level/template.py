@@ -28,11 +28,10 @@ from typing import Mapping
 import numpy as np
 
 from twolevel.compiler.affine_block import AffineBlock
-from twolevel.compiler.block import Block
 from twolevel.compiler.collision import CollisionBlock, collision_free_builtin
 from twolevel.compiler.evaluator import Evaluator
 from twolevel.compiler.signals import AffineSignal, TraceSignals
-from twolevel.compiler.tree import Box, IntervalBounds, Op
+from twolevel.compiler.tree import Block, Box, IntervalBounds, Op
 from twolevel.compiler.types import Emission
 from twolevel.control.high_level.backend import Backend
 from twolevel.control.high_level.linearisation import StepData
