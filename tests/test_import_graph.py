@@ -3,9 +3,10 @@
 Every module under ``twolevel/`` is parsed with :mod:`ast`; each ``import a.b`` and
 ``from a import b`` anywhere in it (module level, functions, methods; relative forms resolved)
 that names a module of twolevel is an edge of the import graph. A name imported from a package
-is an edge to the submodule of that name when there is one, else to the package. Blocks under
-``if TYPE_CHECKING:`` never run and are left out. A lazy import inside a function still makes
-the two modules depend on each other, so it counts like any other.
+is an edge to the submodule of that name when there is one, else to the package. A lazy import
+inside a function, or one under ``if TYPE_CHECKING:`` (for annotations only), still makes the two
+modules depend on each other — a reader needs both to understand either — so it counts like any
+other.
 """
 
 from __future__ import annotations
@@ -27,24 +28,9 @@ def modules() -> dict[str, Path]:
     return out
 
 
-def _is_type_checking(test: ast.expr) -> bool:
-    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
-        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
-
-
 def _imports(tree: ast.AST) -> list[ast.Import | ast.ImportFrom]:
-    """Every import statement of ``tree``, at any depth, except under ``if TYPE_CHECKING:``."""
-    found: list[ast.Import | ast.ImportFrom] = []
-    todo: list[ast.AST] = [tree]
-    while todo:
-        node = todo.pop()
-        if isinstance(node, (ast.Import, ast.ImportFrom)):
-            found.append(node)
-        elif isinstance(node, ast.If) and _is_type_checking(node.test):
-            todo.extend(node.orelse)
-            continue
-        todo.extend(ast.iter_child_nodes(node))
-    return found
+    """Every import statement of ``tree``, at any depth (``if TYPE_CHECKING:`` blocks included)."""
+    return [node for node in ast.walk(tree) if isinstance(node, (ast.Import, ast.ImportFrom))]
 
 
 def _known(name: str, mods: dict[str, Path]) -> str | None:
@@ -161,7 +147,7 @@ def test_the_graph_sees_imports_inside_functions_and_relative_ones(tmp_path: Pat
     )
     found = _imports(ast.parse(src))
     names = sorted(n.module or "." if isinstance(n, ast.ImportFrom) else n.names[0].name for n in found)
-    assert names == [".", "c", "twolevel.a", "twolevel.e", "twolevel.h.i", "typing"]
+    assert names == [".", "c", "twolevel.a", "twolevel.d", "twolevel.e", "twolevel.h.i", "typing"]
     assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
     assert path_through({"a": {"b"}, "b": {"c", "a"}, "c": {"a"}}, ["a", "b", "c"]) == ["a", "b", "a"]
 
