@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from twolevel.models.obb import box_corners
-from twolevel.safety.assumptions import PEDESTRIAN, MotionBounds
+from twolevel.world.assumptions import PEDESTRIAN, MotionBounds
 from twolevel.safety.network import LIGHT, STOP_SIGN, Network
 from twolevel.safety.polygons import lane_point
 from twolevel.world.traffic import RED, TrafficState

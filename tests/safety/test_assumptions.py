@@ -12,7 +12,7 @@ import pytest
 from typer.testing import CliRunner
 
 from twolevel.cli import app
-from twolevel.safety.assumptions import (
+from twolevel.world.assumptions import (
     CYCLIST, PEDESTRIAN, RSS_BOUNDS, VEHICLE, VEHICLE_BOUNDS, CYCLIST_BOUNDS, PEDESTRIAN_BOUNDS, kinds_of,
     safe_distance,
 )

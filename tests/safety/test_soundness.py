@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 from safety_worlds import place, world
 from legal import sample
-from twolevel.safety.assumptions import CYCLIST, PEDESTRIAN, VEHICLE, Assumptions, kinds_of
+from twolevel.world.assumptions import CYCLIST, PEDESTRIAN, VEHICLE, Assumptions, kinds_of
 from twolevel.safety.network import network_of
 from twolevel.safety.occupancy import Intervals, predict
 from twolevel.safety.responsibility import contains

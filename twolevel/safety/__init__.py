@@ -12,7 +12,7 @@ invariably safe states).
 
 **What it rests on** (each written down where it is used):
 
-* the declared **assumptions about others** (:mod:`twolevel.safety.assumptions`; SPOT's and
+* the declared **assumptions about others** (:mod:`twolevel.world.assumptions`; SPOT's and
   RSS's published defaults, the scenario's ``assumptions:`` section may change them and
   ``twolevel check`` warns when it makes them tighter): bounded speed (a factor over the limit)
   and acceleration, no reversing, staying on their lanes (changing to parallel ones when allowed),
@@ -69,8 +69,6 @@ import importlib
 from typing import Any
 
 _EXPORTS = {
-    "Assumptions": "assumptions", "MotionBounds": "assumptions", "ResponseBounds": "assumptions",
-    "kinds_of": "assumptions", "safe_distance": "assumptions",
     "Network": "network", "network_of": "network",
     "Intervals": "occupancy", "Occupancy": "occupancy", "predict": "occupancy",
     "FailSafe": "failsafe", "FailSafeSettings": "failsafe", "Manoeuvre": "failsafe", "roll": "failsafe",

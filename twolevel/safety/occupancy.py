@@ -1,5 +1,5 @@
 """Set-based occupancy prediction: where each participant may be, per time interval, under the
-declared assumptions (:mod:`twolevel.safety.assumptions`; SPOT's method, Koschi & Althoff 2017).
+declared assumptions (:mod:`twolevel.world.assumptions`; SPOT's method, Koschi & Althoff 2017).
 
 For every participant and every interval [t_j, t_{j+1}] [s] after the prediction time, a union
 of convex polygons that contains its body whatever it does within its bounds:
@@ -49,7 +49,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from twolevel.safety.assumptions import PEDESTRIAN, Assumptions
+from twolevel.world.assumptions import PEDESTRIAN, Assumptions
 from twolevel.safety.network import CELL_LENGTH, CELL_TURN, LIGHT, STOP_SIGN, Network
 from twolevel.safety.polygons import OCTAGON_NORMALS, band_pieces, disc_hull_octagons, lane_point
 from twolevel.world.traffic import RED, TrafficState
@@ -279,7 +279,7 @@ def predict(net: Network, traffic: TrafficState, t: float, intervals: Intervals,
             roi: tuple[np.ndarray, np.ndarray] | None = None) -> Occupancy:
     """The occupancy of the participants (active, and ``include`` (N,) if given) over
     ``intervals`` from the traffic at absolute time ``t`` [s]; ``kinds`` (N,) their kinds of road
-    user (:func:`~twolevel.safety.assumptions.kinds_of`). With ``roi`` = (centres (J, 2) [m],
+    user (:func:`~twolevel.world.assumptions.kinds_of`). With ``roi`` = (centres (J, 2) [m],
     radii (J,) [m]) only the pieces that may reach the circle of their interval are kept (bounding
     circles of whole stretches are tested before the stretches are cut into pieces)."""
     mask = traffic.active.copy()

@@ -58,7 +58,7 @@ import numpy as np
 from twolevel.models.obb import box_corners, intersects, rect_axes
 from twolevel.models.params import VehicleParams
 from twolevel.models.rollout import Backend, rollout
-from twolevel.safety.assumptions import kinds_of
+from twolevel.world.assumptions import kinds_of
 from twolevel.safety.failsafe import FailSafe, FailSafeSettings, brake_rate, manoeuvres, roll
 from twolevel.safety.network import Network, network_of
 from twolevel.safety.occupancy import Intervals, Occupancy, predict

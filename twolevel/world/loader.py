@@ -440,8 +440,8 @@ def _check_scenario(spec: ScenarioFile, doc: Document, m: MapFile) -> list[Diagn
 def _check_assumptions(spec: ScenarioFile, doc: Document, known: list[str]) -> list[Diagnostic]:
     """``assumptions.road_users`` names participants or populations (YML416); a bound tighter
     than its documented default is a warning (YML423): the guarantee then covers fewer of the
-    behaviours others may show (twolevel/safety/assumptions.py decides what is tighter)."""
-    from twolevel.safety.assumptions import tighter_than_default
+    behaviours others may show (twolevel/world/assumptions.py decides what is tighter)."""
+    from twolevel.world.assumptions import tighter_than_default
 
     a = spec.assumptions
     if a is None:
@@ -461,7 +461,7 @@ def _check_assumptions(spec: ScenarioFile, doc: Document, known: list[str]) -> l
             out.append(YML423(f"assumption '{kind}.{name}' = {value!r} is tighter than the default {default!r}",
                               doc.locate(("assumptions", kind, name), value=True),
                               hint="others may do more than assumed here; the safety guarantee covers only what "
-                                   "is assumed (defaults and sources: twolevel/safety/assumptions.py)"))
+                                   "is assumed (defaults and sources: twolevel/world/assumptions.py)"))
     return out
 
 

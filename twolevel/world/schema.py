@@ -341,7 +341,7 @@ class RunSettings(_Model):
     seed: int = Field(default=0, ge=0, description="seed of every random choice")
 
 
-_ASSUMPTIONS = "defaults and sources: twolevel/safety/assumptions.py"
+_ASSUMPTIONS = "defaults and sources: twolevel/world/assumptions.py"
 
 
 def _bound(gt: float, le: float, what: str) -> Any:

@@ -14,7 +14,7 @@ from typing import Mapping
 
 import numpy as np
 
-from twolevel.safety.assumptions import Assumptions, from_spec
+from twolevel.world.assumptions import Assumptions, from_spec
 from twolevel.world.geometry import Lane, LaneSet, Route, concatenate, lane_from_reference, resample, sample_road
 from twolevel.world.loader import Scenario, _route_lanes, successors
 from twolevel.world.schema import ControllerSettings, IDMParams, MapFile, Placement, Population

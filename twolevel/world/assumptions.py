@@ -52,7 +52,10 @@ collision as not the ego's fault once the ego has been ahead in the lane for ρ_
 Which participant is which road user: ``assumptions.road_users`` maps participant ids and
 population ids to ``vehicle``, ``cyclist`` or ``pedestrian``; everyone else is a vehicle.
 
-Light module (no numpy): ``twolevel check`` imports it for the defaults and the warnings.
+They belong to the world: a scenario declares them (its ``assumptions:`` section, read by
+:func:`from_spec` into :attr:`twolevel.world.world.World.assumptions`), and the safety layer
+(:mod:`twolevel.safety`) rests on them. Light module (no numpy): ``twolevel check`` imports it
+for the defaults and the warnings.
 """
 
 from __future__ import annotations
