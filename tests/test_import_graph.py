@@ -166,3 +166,11 @@ def test_the_solver_neutral_layer_does_not_import_the_compiler() -> None:
     up = sorted((m, t) for m, ts in g.items() if m.startswith("twolevel.milp") for t in ts
                 if t.startswith("twolevel.compiler"))
     assert not up, up
+
+
+def test_no_module_getattr_shims() -> None:
+    """No module answers attribute lookups itself (``def __getattr__`` at module level): a name
+    is found where it is defined or plainly imported."""
+    shims = [name for name, path in modules().items()
+             if any(isinstance(n, ast.FunctionDef) and n.name == "__getattr__" for n in ast.parse(path.read_text()).body)]
+    assert not shims, shims

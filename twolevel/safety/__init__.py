@@ -44,45 +44,37 @@ invariably safe states).
 * the evasive fail-safe (swerving within the drivable area) is not implemented: braking, and
   clearing a conflict zone first, are.
 
-**Public API** (imported lazily: ``import twolevel.safety`` imports no numpy)::
+**Public API** (the names below are importable from ``twolevel.safety``)::
 
-    context(world, params=None, settings=None) -> Context
+    context(world, params=None, settings=None) -> Context                      # verify.py
     verify_step(ctx, x0, control, traffic, t, s_hint=None) -> Verdict
     verify_initial_state(ctx, x0, traffic, t=0.0, s_hint=None) -> Verdict
     time_to_react(ctx, x0, plan, traffic, t, s_hint=None) -> TimeToReact
-    predict(net, traffic, t, intervals, assumptions, kinds, include=None, roi=None) -> Occupancy
-    network_of(world) -> Network
-    roll(x0, plan, route, s0, dt, params, settings=FailSafeSettings(), backend="auto") -> list[FailSafe]
+    predict(net, traffic, t, intervals, assumptions, kinds, include=None, roi=None) -> Occupancy  # occupancy.py
+    network_of(world) -> Network                                                # network.py
+    roll(x0, plan, route, s0, dt, params, settings=FailSafeSettings(), backend="auto") -> list[FailSafe]  # failsafe.py
     classify(t, ego, other, ego_box, other_box, *, other_inside=None, ego_lane=None, other_lane=None,
-             stop_speed=0.1, response_time=2.0) -> Responsibility
+             stop_speed=0.1, response_time=2.0) -> Responsibility              # responsibility.py
     stayed_within(ctx, traffic_states, i) -> np.ndarray
 
 Records: :class:`Verdict` (``verified``, ``failsafe``, ``refutations``, ``horizon``,
 ``participants``, ``timings_ms``), :class:`FailSafe` (``controls`` (N, 2) [δ rad, γ] from the
 state after the intended step, ``states``, ``control_at(k)``), :class:`Refutation`,
-:class:`TimeToReact`, :class:`Responsibility`, :class:`Assumptions`.
+:class:`TimeToReact`, :class:`Responsibility`; the assumptions are the world's
+(:class:`~twolevel.world.assumptions.Assumptions`). Importing this package imports numpy:
+``twolevel check`` never imports it.
 """
 
-from __future__ import annotations
+from twolevel.safety.failsafe import FailSafe, FailSafeSettings, Manoeuvre, roll
+from twolevel.safety.network import Network, network_of
+from twolevel.safety.occupancy import Intervals, Occupancy, predict
+from twolevel.safety.responsibility import Responsibility, classify, stayed_within
+from twolevel.safety.verify import (
+    Context, Refutation, TimeToReact, Verdict, VerifySettings, context, time_to_react, verify_initial_state, verify_step,
+)
 
-import importlib
-from typing import Any
-
-_EXPORTS = {
-    "Network": "network", "network_of": "network",
-    "Intervals": "occupancy", "Occupancy": "occupancy", "predict": "occupancy",
-    "FailSafe": "failsafe", "FailSafeSettings": "failsafe", "Manoeuvre": "failsafe", "roll": "failsafe",
-    "Context": "verify", "Verdict": "verify", "Refutation": "verify", "TimeToReact": "verify",
-    "VerifySettings": "verify", "context": "verify", "verify_step": "verify", "verify_initial_state": "verify",
-    "time_to_react": "verify",
-    "Responsibility": "responsibility", "classify": "responsibility", "stayed_within": "responsibility",
-}
-
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str) -> Any:
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module 'twolevel.safety' has no attribute {name!r}")
-    return getattr(importlib.import_module(f"twolevel.safety.{module}"), name)
+__all__ = [
+    "Context", "FailSafe", "FailSafeSettings", "Intervals", "Manoeuvre", "Network", "Occupancy", "Refutation",
+    "Responsibility", "TimeToReact", "Verdict", "VerifySettings", "classify", "context", "network_of", "predict",
+    "roll", "stayed_within", "time_to_react", "verify_initial_state", "verify_step",
+]
