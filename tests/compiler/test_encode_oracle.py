@@ -14,7 +14,7 @@ from twolevel.milp.highs import solve_highs
 from twolevel.milp.solution import Status
 from twolevel.monitor.robustness import robustness
 
-from milp_systems import DT, H, PAST, T, double_integrator, random_formula, rollout
+from helpers.milp_systems import DT, H, PAST, T, double_integrator, random_formula, rollout
 
 NOW = PAST  # trace index of the current sample
 SEEDS = range(120)

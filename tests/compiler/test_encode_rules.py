@@ -14,7 +14,7 @@ from twolevel.milp.highs import solve_highs
 from twolevel.milp.solution import Status
 from twolevel.stl import ast
 
-from milp_systems import DT, H, PAST, T, double_integrator, random_formula
+from helpers.milp_systems import DT, H, PAST, T, double_integrator, random_formula
 
 NOW = PAST
 P, V = ast.Var("p"), ast.Var("v")

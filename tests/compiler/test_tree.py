@@ -10,7 +10,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from milp_systems import DT, H, PAST, T, double_integrator, random_formula
+from helpers.milp_systems import DT, H, PAST, T, double_integrator, random_formula
 from twolevel.compiler.collision import collision_free_builtin, reachable_box
 from twolevel.compiler.driver import encode
 from twolevel.compiler.evaluator import Evaluator

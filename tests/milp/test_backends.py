@@ -16,7 +16,7 @@ from twolevel.milp.model import PatternCache
 from twolevel.milp.solution import Status
 from twolevel.stl import ast
 
-from milp_systems import DT, H, PAST, double_integrator
+from helpers.milp_systems import DT, H, PAST, double_integrator
 
 NOW = PAST
 P = ast.Var("p")

@@ -8,7 +8,7 @@ import itertools
 import numpy as np
 import pytest
 
-from milp_systems import DT, H, T, double_integrator, random_formula
+from helpers.milp_systems import DT, H, T, double_integrator, random_formula
 from twolevel.compiler.driver import encode
 from twolevel.compiler.types import Requirement
 from twolevel.milp.builder import ModelBuilder

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tests.monitor import _formulas as F
+from helpers import formulas as F
 from twolevel.monitor.batch import robustness_batch
 from twolevel.monitor.errors import MonitorError
 from twolevel.monitor.robustness import robustness

@@ -18,7 +18,7 @@ from twolevel.monitor.online import OnlineMonitor
 from twolevel.monitor.robustness import MonitorError, evaluate_rules, robustness
 from twolevel.stl import ast as A
 
-from ._formulas import formulas, traces
+from helpers.formulas import formulas, traces
 
 INF = math.inf
 DT = 0.1

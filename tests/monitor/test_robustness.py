@@ -14,7 +14,7 @@ from twolevel.monitor import windows
 from twolevel.monitor.robustness import DEFAULT_BUILTINS, MonitorError, evaluate_rules, robustness
 from twolevel.stl import ast as A
 
-from ._formulas import formulas, traces
+from helpers.formulas import formulas, traces
 
 INF = math.inf
 X = np.array([1.0, -2.0, 3.0, 0.0, -1.0])

@@ -22,7 +22,7 @@ from hypothesis import HealthCheck, given, settings
 from twolevel.monitor.robustness import robustness
 from twolevel.stl import ast as A
 
-from ._formulas import SIGNALS, formulas, traces
+from helpers.formulas import SIGNALS, formulas, traces
 
 rtamt = pytest.importorskip("rtamt")
 

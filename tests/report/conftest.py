@@ -1,4 +1,4 @@
-"""Fixtures for the report tests: hand-made run directories (see report_runs.py)."""
+"""Fixtures for the report tests: hand-made run directories (see helpers/report_runs.py)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from typing import Any, Callable
 
 import pytest
 
-from report_runs import traffic_rows, write_run
+from helpers.report_runs import traffic_rows, write_run
 
 
 @pytest.fixture

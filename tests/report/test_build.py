@@ -103,7 +103,7 @@ def test_comparison_overlays_runs_and_tabulates_ratios(make_traffic_run) -> None
 
 
 def test_same_directory_names_get_distinct_labels(tmp_path, make_traffic_run) -> None:
-    from report_runs import traffic_rows, write_run
+    from helpers.report_runs import traffic_rows, write_run
 
     a = write_run(tmp_path / "with" / "run", traffic_rows(20)[0])
     b = write_run(tmp_path / "without" / "run", traffic_rows(20)[0])

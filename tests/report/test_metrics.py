@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from report_runs import write_run
+from helpers.report_runs import write_run
 from twolevel.report.comparison import compare_metrics
 from twolevel.report.metrics import COLLISION_LINE_M, compute_metrics, find_violations, intervals
 from twolevel.sim.trace import TraceWriter, read_run

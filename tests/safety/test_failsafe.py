@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from safety_worlds import ego_on, world
+from helpers.safety_worlds import ego_on, world
 from twolevel.models import fourwheel as fw
 from twolevel.safety.failsafe import FULL, FailSafeSettings, Manoeuvre, brake_rate, manoeuvres, roll
 from twolevel.safety.network import network_of

@@ -7,7 +7,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from safety_worlds import world
+from helpers.safety_worlds import world
 from twolevel.safety.network import network_of
 from twolevel.safety.polygons import OCTAGON_NORMALS, band_pieces, disc_hull_octagons, lane_point
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from safety_worlds import place, world
+from helpers.safety_worlds import place, world
 from twolevel.safety.responsibility import (
     EGO_AT_FAULT, EGO_STANDING, HIT_FROM_BEHIND, OTHER_BROKE_ASSUMPTIONS, classify, stayed_within,
 )

@@ -1,5 +1,5 @@
 """Soundness of the occupancy prediction: participants behaving legally, at random, within the
-declared assumptions (tests/safety/legal.py) always lie inside their predicted occupancy — and the
+declared assumptions (tests/helpers/legal.py) always lie inside their predicted occupancy — and the
 check is strong enough to notice a prediction that is too tight."""
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from safety_worlds import place, world
-from legal import sample
+from helpers.safety_worlds import place, world
+from helpers.legal import sample
 from twolevel.world.assumptions import CYCLIST, PEDESTRIAN, VEHICLE, Assumptions, kinds_of
 from twolevel.safety.network import network_of
 from twolevel.safety.occupancy import Intervals, predict
@@ -42,7 +42,7 @@ def escapes(name: str, who: str, lane_pick: float, s_pick: float, v_pick: float,
                         v=v_pick * bounds.v_max)
     else:
         if changes and name in ("signals", "crossing"):
-            changes = False  # the sampler keeps to lines only without lane changes (see legal.py)
+            changes = False  # the sampler keeps to lines only without lane changes (see helpers/legal.py)
         lane = w.lanes.lanes[int(lane_pick * len(w.lanes.lanes)) % len(w.lanes.lanes)]
         limit = float(w.limits.at(np.array([lane.index]), np.array([0.0]))[0])
         traffic = place(w, traffic, who, lane.id, s_pick * lane.length, v=v_pick * bounds.speed_cap(limit))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from safety_worlds import ego_on, place, world
+from helpers.safety_worlds import ego_on, place, world
 from twolevel.models.rollout import rollout
 from twolevel.safety.verify import context, time_to_react, verify_initial_state, verify_step
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from tests.world.test_loader import MAP, SCENARIO, write
+from helpers.world_files import MAP, SCENARIO, write
 from twolevel.world.loader import check_world_file, load_scenario
 
 

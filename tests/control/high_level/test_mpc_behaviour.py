@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mpc_worlds import closed_loop, controller, make_world, rules
+from helpers.mpc_worlds import closed_loop, controller, make_world, rules
 
 HIGHWAY_EGO = "{start: {lane: middle, s: 20, lateral: %s}, speed: %s, desired_speed: %s}"
 HIGHWAY_ROUTE = "{start: {lane: middle, s: 20}, goal: {lane: middle, s: 900}, stop_at_goal: false}"

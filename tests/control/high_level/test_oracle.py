@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mpc_worlds import INSTANCE_RULES, controller, random_instance, rules
+from helpers.mpc_worlds import INSTANCE_RULES, controller, random_instance, rules
 from twolevel.monitor.robustness import robustness
 
 

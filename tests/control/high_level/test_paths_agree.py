@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mpc_worlds import INSTANCE_EGO, INSTANCE_ROUTE, INSTANCE_RULES, controller, make_world, random_instance, rules
+from helpers.mpc_worlds import INSTANCE_EGO, INSTANCE_ROUTE, INSTANCE_RULES, controller, make_world, random_instance, rules
 
 
 @pytest.mark.parametrize("seed", range(20))

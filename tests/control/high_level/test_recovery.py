@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mpc_worlds import closed_loop, controller, make_world, rules
+from helpers.mpc_worlds import closed_loop, controller, make_world, rules
 
 EGO = "{start: {lane: middle, s: 20}, speed: 12.0, desired_speed: 13.0}"
 ROUTE = "{start: {lane: middle, s: 20}, goal: {lane: middle, s: 900}, stop_at_goal: false}"

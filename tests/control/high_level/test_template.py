@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mpc_worlds import advance, make_world, rules
+from helpers.mpc_worlds import advance, make_world, rules
 from twolevel.control.high_level.controller import HighLevelController
 from twolevel.control.high_level.settings import MPCSettings
 from twolevel.control.high_level.problem import assemble

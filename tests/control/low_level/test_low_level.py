@@ -11,7 +11,7 @@ from twolevel.control.low_level.settings import LowLevelSettings
 from twolevel.models import fourwheel as fw
 from twolevel.world.sensing import Memory
 
-from mpc_worlds import highway_world
+from helpers.mpc_worlds import highway_world
 
 
 def _decide(w, rs, v: float, u: np.ndarray, *, samples: int = 200, step: int = 0, least: bool = True):

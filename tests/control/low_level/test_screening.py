@@ -17,7 +17,7 @@ from twolevel.models import fourwheel as fw
 from twolevel.stl.parser import parse
 from twolevel.world.sensing import Memory
 
-from mpc_worlds import highway_world
+from helpers.mpc_worlds import highway_world
 
 
 def parse_formula(text: str):  # noqa: ANN201

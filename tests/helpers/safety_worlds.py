@@ -14,7 +14,7 @@ from twolevel.world.loader import load_scenario
 from twolevel.world.traffic import TrafficState
 from twolevel.world.world import World, build_world
 
-HERE = Path(__file__).parent / "worlds"
+HERE = Path(__file__).resolve().parents[1] / "safety" / "worlds"
 REPO = Path(__file__).resolve().parents[2]
 
 
