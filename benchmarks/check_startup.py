@@ -1,4 +1,4 @@
-"""Start-up cost of `twolevel check` (design.md: well under 0.5 s for one file), printed, not asserted.
+"""Start-up cost of `twolevel check` (the aim: well under 0.5 s for one file), printed, not asserted.
 
 Each figure is the best of 5 fresh processes (lark's parse tables cached on disk by a first run):
 importing the parser and parsing one rule file; `twolevel check` on one rule file; on the whole

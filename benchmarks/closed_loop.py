@@ -1,4 +1,4 @@
-"""Closed-loop figures of the paper's four scenarios (issue 6's benchmark).
+"""Closed-loop figures of the paper's four scenarios (the README's "Results against the paper" and "Measured").
 
 For each scenario (with the monitor; ``--no-monitor`` also runs the MPC alone): control-step
 time of both levels together (median / p95 / p99 / max) and per level, steps over the 100 ms

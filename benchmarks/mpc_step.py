@@ -1,4 +1,4 @@
-"""Per-MPC-step figures of the high-level controller (issue 5's benchmark). Prints figures.
+"""Per-MPC-step figures of the high-level controller (the README's "Measured"). Prints figures.
 
 Closed-loop runs on the kinematic bicycle itself (the MPC's model) on the three-lane highway with
 N = 0, 6, 12, 18, 30 constant-velocity vehicles around the ego (within r_near = 40 m) and a slow

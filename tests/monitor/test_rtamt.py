@@ -1,7 +1,7 @@
 """Differential test: the offline oracle against RTAMT 0.4.10's offline discrete-time monitor
 (``rtamt.StlDiscreteTimeSpecification().evaluate``) on random formulas and signals.
 
-Restricted to what RTAMT computes correctly (../shared/anchors.md): the emitter below
+Restricted to what RTAMT 0.4.10 computes correctly (its known faults): the emitter below
 parenthesises every arithmetic operation (RTAMT reads ``a-b+c`` as ``a-(b+c)``), never writes a
 leading unary minus (``-a>=0`` is rejected; we write ``(0 - a)``), writes ``!==`` for not-equal,
 and the generator never inverts an interval, uses no ``true``/``false`` literal (not accepted in

@@ -87,7 +87,8 @@ def test_fold_constants() -> None:
 
 
 def test_activation_is_partial_evaluation() -> None:
-    """Known signals fold the rule away before the encoder sees it (design.md)."""
+    """Known signals fold the rule away before the encoder sees it (activation is partial
+    evaluation: docs/architecture.md, "The rule language")."""
     red = f("always[0:1] ((light_red > 0.5) -> (d_light > 0))")
     assert substitute(red, {"light_red": 0.0}) == BoolConst(True)
     assert substitute(red, {"light_red": 1.0}) == f("always[0:1] (d_light > 0)")

@@ -2,8 +2,9 @@
 
 Defaults are a passenger car, CommonRoad vehicle 2 (BMW 320i; Althoff & Würsching,
 "CommonRoad: Vehicle Models", 2020, Tab. 6, shipped as ``parameters_vehicle2.yaml`` in
-``commonroad-vehicle-models`` 3.0.2), with the tyre, actuator and box figures of
-/work/shared/anchors.md ("Vehicle models"). Every field says its unit and source.
+``commonroad-vehicle-models`` 3.0.2), with Pacejka's generic dry-tarmac tyre figures, CARLA's
+default car's brake and engine figures and the paper's boxes. Every field says its unit and
+source ([CR2], [PAC], [CARLA], [PAPER]: see :class:`VehicleParams`).
 
 Per-scenario changes go through :meth:`VehicleParams.with_overrides` (also on
 :class:`BicycleParams`), which rejects unknown names with :class:`UnknownParameterError`
@@ -117,8 +118,9 @@ class VehicleParams:
     """Detailed four-wheel model parameters (SI units throughout).
 
     Sources: [CR2] CommonRoad vehicle 2, BMW 320i (parameters_vehicle2.yaml, 3.0.2);
-    [PAC] Pacejka, "Tire and Vehicle Dynamics", generic dry-tarmac Magic Formula (anchors.md);
-    [CARLA] CARLA default car's brake/engine figures (anchors.md); [PAPER] the paper's boxes.
+    [PAC] Pacejka, "Tire and Vehicle Dynamics", generic dry-tarmac Magic Formula (B 10, C 1.9,
+    D 1 × μ·Fz, E 0.97); [CARLA] CARLA's default car: brake torque 1500 N·m per wheel, engine
+    torque 400–500 N·m, final ratio 4; [PAPER] the paper's boxes (4.22 m × 1.8 m).
     """
 
     # --- mass and geometry -------------------------------------------------------------------

@@ -27,7 +27,7 @@ __all__ = ["BASE_COLUMNS", "TEXT_COLUMNS", "RunStatus", "TraceWriter", "RunData"
 TRACE_FILE = "trace.csv"
 RUN_FILE = "run.json"
 
-#: The columns every trace starts with, in order (design.md, "Simulation"; issue 6).
+#: The columns every trace starts with, in order (what each holds: :mod:`twolevel.sim.engine`).
 BASE_COLUMNS: tuple[str, ...] = (
     "t",
     "x",

@@ -134,7 +134,8 @@ def is_linear(term: Node, constants: frozenset[str] | set[str] = frozenset()) ->
 
 
 def compare_robustness(op: str, a: float, b: float) -> float:
-    """Robustness of ``a op b`` (design.md): ``b - a`` for ``<``/``<=``, ``a - b`` for
+    """Robustness of ``a op b`` (RTAMT's quantitative semantics, as the offline monitor
+    :mod:`twolevel.monitor.robustness` computes it): ``b - a`` for ``<``/``<=``, ``a - b`` for
     ``>``/``>=``, ``-|a - b|`` for ``==``, ``|a - b|`` for ``!==``."""
     if op in ("<", "<="):
         return b - a

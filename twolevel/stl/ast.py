@@ -210,7 +210,7 @@ class Edge(Node):
 @dataclass(frozen=True)
 class Call(Node):
     """A built-in world predicate, e.g. ``collision_free(d)``; its meaning depends on the level
-    (design.md, "The rule language")."""
+    (docs/architecture.md, "The rule language")."""
 
     name: str
     args: tuple[Term, ...]

@@ -51,7 +51,8 @@ MAX_INTERVAL_SECONDS = 1e6
 """Longest finite interval bound [s] when no ``dt`` is known (STL220): about 11.6 days."""
 
 BUILTIN_ARITY: Mapping[str, int] = MappingProxyType({"collision_free": 1})
-"""Number of arguments of each built-in world predicate (design.md: collision_free(d) [m])."""
+"""Number of arguments of each built-in world predicate: ``collision_free(d)``, d [m] (what it
+means at each level: docs/architecture.md, "The rule language")."""
 
 
 def map_vars(node: Node, fn: Callable[[Var], Node]) -> Node:

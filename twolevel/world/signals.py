@@ -22,7 +22,7 @@ Definitions (sensing is limited to ``r_near``):
   line the light no longer applies, unless it crossed while the light was red, in which case it
   keeps applying (with negative ``d_light``) until PASS_MARGIN past the line, so a rule sees the
   violation. ``light_red`` = 1 when the applying light is red, or yellow and the ego can still stop
-  (d_light ≥ v²/(2·yellow_decel)); otherwise 0. (Issue 3's "yellow-and-cannot-stop" reads
+  (d_light ≥ v²/(2·yellow_decel)); otherwise 0. (Not "yellow and cannot stop", which reads
   inverted: a driver who can stop at yellow must; one who cannot proceeds.)
 * ``d_lead``/``v_lead``: among vehicles within r_near whose route projection is ahead (s_i > s),
   in the ego's lane (|e_i − e| < lane width / 2) and heading the same way, the nearest: bumper-to-
