@@ -13,7 +13,8 @@ from hypothesis import strategies as st
 
 from helpers.report_runs import write_run
 from twolevel.report.comparison import compare_metrics
-from twolevel.report.metrics import COLLISION_LINE_M, compute_metrics, find_violations, intervals
+from twolevel.report.metrics import COLLISION_LINE_M, compute_metrics, find_violations
+from twolevel.sim.summary import intervals
 from twolevel.sim.trace import TraceWriter, read_run
 
 NAN = float("nan")

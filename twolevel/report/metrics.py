@@ -29,6 +29,7 @@ import numpy as np
 from twolevel.sim.summary import LEVEL as _LEVEL
 from twolevel.sim.summary import LEVELS as _LEVELS
 from twolevel.sim.summary import StepDecision
+from twolevel.sim.summary import intervals
 from twolevel.sim.summary import jsonable as _jsonable
 from twolevel.sim.trace import RunData
 
@@ -263,13 +264,6 @@ class Metrics(_Serialisable):
 
 # ---------------------------------------------------------------------------------------------
 # helpers
-
-
-def intervals(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Start and end indices (inclusive) of the maximal runs of True in ``mask``."""
-    m = np.concatenate(([0], np.asarray(mask, dtype=np.int8), [0]))
-    d = np.diff(m)
-    return np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1
 
 
 def sample_durations(t: np.ndarray, dt: float | None = None) -> np.ndarray:

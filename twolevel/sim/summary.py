@@ -15,7 +15,8 @@ import numpy as np
 from twolevel.milp.solution import ValueEnum
 from twolevel.sim.trace import RunStatus
 
-__all__ = ["StepDecision", "LEVELS", "LEVEL", "StepInfo", "Collision", "Closest", "RuleViolations", "RunSummary", "summarise", "jsonable"]
+__all__ = ["StepDecision", "LEVELS", "LEVEL", "StepInfo", "Collision", "Closest", "RuleViolations", "RunSummary",
+           "summarise", "jsonable", "intervals"]
 
 class StepDecision(ValueEnum):
     """The trace's ``decision``: whose control a step applied. With the monitor, the low level's
@@ -169,6 +170,14 @@ def jsonable(value: Any) -> Any:
             return "inf" if f > 0 else "-inf"
         return f
     return value
+
+
+def intervals(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Start and end indices (inclusive) of the maximal runs of True in ``mask`` (the episodes in
+    which something held, e.g. a rule was violated: the report's and the verdict's)."""
+    m = np.concatenate(([0], np.asarray(mask, dtype=np.int8), [0]))
+    d = np.diff(m)
+    return np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1
 
 
 def _pct(a: np.ndarray, q: float) -> float:

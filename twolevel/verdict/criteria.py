@@ -41,8 +41,8 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from twolevel.report.metrics import intervals
 from twolevel.sim.engine import GOAL_ZONE
+from twolevel.sim.summary import intervals
 from twolevel.verdict.drivable import box_outside
 from twolevel.verdict.motion import motion_of
 from twolevel.world.schema import Expect, GoalCriterion, RoadCriterion
