@@ -159,13 +159,43 @@ def test_no_import_cycles() -> None:
     assert not found, "import cycles between twolevel's modules:\n" + report
 
 
-def test_the_solver_neutral_layer_does_not_import_the_compiler() -> None:
-    """milp/ is below compiler/: the compiler writes into the solver-neutral model, never the
-    other way round."""
+ARCHITECTURE = ROOT.parent / "docs" / "architecture.md"
+
+
+def layers() -> list[set[str]]:
+    """The layer list of ``docs/architecture.md`` ("## Layers", its first ``text`` block), lowest
+    first: each line names the packages (or top-level modules) of one layer before its
+    description."""
+    text = ARCHITECTURE.read_text(encoding="utf-8")
+    section = text.split("\n## Layers\n", 1)[1]
+    block = section.split("```text\n", 1)[1].split("```", 1)[0]
+    out = []
+    for line in block.splitlines():
+        names = line.split("  ", 1)[0]
+        out.append({n.strip() for n in names.split(",") if n.strip()})
+    return out[::-1]
+
+
+def package(module: str) -> str:
+    """``twolevel.x.y`` → ``x``; the package itself → ``twolevel``."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else parts[0]
+
+
+def test_packages_import_only_their_layer_or_below() -> None:
+    """Every package is placed in the documented layers, and none imports one above it."""
+    rank = {name: i for i, names in enumerate(layers()) for name in names}
     g = graph()
-    up = sorted((m, t) for m, ts in g.items() if m.startswith("twolevel.milp") for t in ts
-                if t.startswith("twolevel.compiler"))
-    assert not up, up
+    unplaced = sorted({package(m) for m in g} - set(rank))
+    assert not unplaced, f"packages docs/architecture.md does not place in a layer: {unplaced}"
+    up = sorted(f"{m} → {t}" for m, ts in g.items() for t in ts if rank[package(t)] > rank[package(m)])
+    assert not up, "imports that go up a layer (docs/architecture.md, Layers):\n" + "\n".join(up)
+
+
+def test_the_layer_list_parses() -> None:
+    found = layers()
+    assert found[0] == {"twolevel", "diagnostics", "files", "atomic"} and found[-1] == {"cli", "__main__"}
+    assert [n for names in found for n in names].count("world") == 1
 
 
 def test_no_module_getattr_shims() -> None:
