@@ -19,7 +19,8 @@ class RowSink(Protocol):
     :class:`~twolevel.compiler.emitter.RowEmitter`). Rows are ``Σ v·x[c] ≥ lo``; the row indices
     returned are the builder's; a ``guard`` ≥ 0 records the rows as switched on by that binary."""
 
-    #: emit a value-independent structure at top level (see the module docstring)
+    #: emit a value-independent structure at top level (the block protocol:
+    #: :class:`~twolevel.compiler.tree.Block`)
     stable: bool
 
     @property

@@ -96,9 +96,10 @@ class Block:
     * :class:`~twolevel.compiler.collision.CollisionBlock` — ``collision_free(d)``: one
       max-of-four-faces per vehicle–step pair.
 
-    A block is a leaf of the :data:`Tree` whose value is the ``min`` over its pieces. It is produced by stage 1 (:class:`~twolevel.compiler.evaluator.Evaluator` and the
-    built-ins it calls) and lowered by stage 2 (:class:`~twolevel.compiler.emitter.RowEmitter`,
-    which implements :class:`~twolevel.compiler.sink.RowSink`). A subclass gives:
+    A block is a leaf of the :data:`Tree` whose value is the ``min`` over its pieces. It is
+    produced by stage 1 (:class:`~twolevel.compiler.evaluator.Evaluator` and the built-ins it
+    calls) and lowered by stage 2 (:class:`~twolevel.compiler.emitter.RowEmitter`, which
+    implements :class:`~twolevel.compiler.sink.RowSink`). A subclass gives:
 
     * :meth:`Block.bounds` — interval bounds over the column box ``lb ≤ x ≤ ub``;
     * :meth:`Block.expand` — the equivalent plain tree (used when the block is negated, scaled, added
@@ -109,8 +110,8 @@ class Block:
       pieces that always hold are dropped, pieces that can never hold fail the requirement, big-M
       comes from the bounds. In stable mode at top level (``sink.stable`` and ``guard < 0``) it emits
       a structure that does not depend on the current values (redundant rows kept) and records it
-      with ``RowSink.record``, so that :mod:`twolevel.control.high_level.template` can later rewrite the
-      values in place;
+      with ``RowSink.record``, so that :mod:`twolevel.control.high_level.template` can later
+      rewrite the values in place;
     * :attr:`Block.kind` — its name in those records.
     """
 
