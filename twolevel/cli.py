@@ -364,13 +364,15 @@ def _criteria_table(verdict):  # noqa: ANN001, ANN202 - Verdict and rich are imp
     from rich.markup import escape
     from rich.table import Table
 
+    from twolevel.sim.trace import RunStatus
+
     def num(v: float | None, unit: str) -> str:
         if v is None:
             return "-"
         return (f"{v:.4g} {unit}".strip()) if v == v and abs(v) != float("inf") else str(v)
 
     title = "PASS: every criterion met" if verdict.passed else \
-        f"FAIL: {len(verdict.failed)} of {len(verdict.criteria)} criteria not met" + ("" if verdict.status == "complete" else f" (run {verdict.status})")
+        f"FAIL: {len(verdict.failed)} of {len(verdict.criteria)} criteria not met" + ("" if verdict.status == RunStatus.COMPLETE else f" (run {verdict.status})")
     table = Table(title=title, title_justify="left")
     for col, justify in (("criterion", "left"), ("verdict", "center"), ("measured", "right"), ("bound", "right"),
                          ("margin", "right")):

@@ -129,6 +129,8 @@ def run_case(case: Case, run_dir: str, keep_passed: bool = False, frames: bool =
     """Run ``case`` into ``run_dir`` (its concrete scenario, trace, run.json with the verdict)
     and judge it. Never raises: a case that cannot be run is an ``error`` outcome with the
     reason in ``messages``."""
+    from twolevel.sim.trace import RunStatus
+
     t0 = time.perf_counter()
     messages: list[str] = []
     try:
@@ -152,13 +154,13 @@ def run_case(case: Case, run_dir: str, keep_passed: bool = False, frames: bool =
         return CaseResult(case, "error", "crashed", None, {}, (), run_dir if os.path.isdir(run_dir) else None,
                           0.0, time.perf_counter() - t0, tuple(messages))
     if verdict is None:
-        return CaseResult(case, "error", summary.status, None, {}, (), run_dir, run_s, time.perf_counter() - t0,
+        return CaseResult(case, "error", summary.status.value, None, {}, (), run_dir, run_s, time.perf_counter() - t0,
                           tuple(messages), summary.seed)
-    outcome = "passed" if verdict.passed else ("failed" if summary.status == "complete" else "error")
+    outcome = "passed" if verdict.passed else ("failed" if summary.status is RunStatus.COMPLETE else "error")
     kept: str | None = run_dir
     if outcome == "passed" and not keep_passed:
         shutil.rmtree(run_dir, ignore_errors=True)
         kept = None
-    return CaseResult(case, outcome, summary.status, verdict.to_json(), _margins(verdict.to_json()),
+    return CaseResult(case, outcome, summary.status.value, verdict.to_json(), _margins(verdict.to_json()),
                       tuple(c.name for c in verdict.failed), kept, run_s, time.perf_counter() - t0, tuple(messages),
                       summary.seed, summary.goal_reached_t)

@@ -43,6 +43,7 @@ import numpy as np
 
 from twolevel.sim.engine import GOAL_ZONE
 from twolevel.sim.summary import intervals
+from twolevel.sim.trace import RunStatus
 from twolevel.verdict.drivable import box_outside
 from twolevel.verdict.motion import motion_of
 from twolevel.world.schema import Expect, GoalCriterion, RoadCriterion
@@ -285,5 +286,5 @@ def judge(expect: Expect, world: Any, cols: Mapping[str, Any], summary: Mapping[
     if expect.max_stopped is not None:
         longest, at = _stopped(world, cols, summary, stop_speed)
         out.append(_upper("max_stopped", longest, at, expect.max_stopped, "s", "longest standstill"))
-    passed = status == "complete" and all(c.passed for c in out)
+    passed = status == RunStatus.COMPLETE and all(c.passed for c in out)
     return Verdict(passed, status, tuple(out))
