@@ -51,10 +51,11 @@ def test_paper_scenarios_have_their_structure() -> None:
 
 def test_rule_file_reading_an_unprovided_signal_fails_check(tmp_path: Path) -> None:
     (tmp_path / "r.stl").write_text("input float v\ninput float warp\nfast = always[0:1] (v <= warp);\n")
+    (tmp_path / "q.stl").write_text("input float v\nslow = always[0:1] (v >= 0);\n")
     text = (ROOT / "examples/scenario/scenario.yaml").read_text()
     text = text.replace("map: map.yaml", f"map: {ROOT / 'examples/scenario/map.yaml'}")
     text = text.replace("  - ../../rules/speed_limit.stl", "  - r.stl")
-    text = text.replace("  - file: ../../rules/red_light.stl", "  - {file: r.stl, constants: {nope: 1}}")
+    text = text.replace("  - file: ../../rules/red_light.stl", "  - {file: q.stl, constants: {nope: 1}}")
     (tmp_path / "s.yaml").write_text(text)
     diags = check_world_file(tmp_path / "s.yaml")
     assert any(d.is_error and Path(d.span.file).name == "r.stl" and "warp" in d.message for d in diags), diags

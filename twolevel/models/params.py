@@ -17,15 +17,19 @@ Light module: no numpy.
 from __future__ import annotations
 
 import difflib
+import math
 from dataclasses import dataclass, fields, replace
 from typing import Any, Mapping, TypeVar
 
 __all__ = [
     "G",
+    "Range",
     "BicycleParams",
     "VehicleParams",
     "UnknownParameterError",
     "InvalidParameterError",
+    "BICYCLE_RANGES",
+    "VEHICLE_RANGES",
 ]
 
 G = 9.81
@@ -60,6 +64,34 @@ class InvalidParameterError(ValueError):
         super().__init__(f"parameter {name!r} = {value!r}: {reason}")
 
 
+@dataclass(frozen=True)
+class Range:
+    """The physically valid values of one parameter: ``lo`` to ``hi`` in ``unit``, each end
+    closed unless ``lo_open``/``hi_open``. NaN and ±inf lie in no range."""
+
+    lo: float
+    hi: float
+    unit: str
+    lo_open: bool = False
+    hi_open: bool = False
+
+    def contains(self, value: float) -> bool:
+        """Whether ``value`` is a finite number in the range (written so that NaN fails)."""
+        above = value > self.lo if self.lo_open else value >= self.lo
+        below = value < self.hi if self.hi_open else value <= self.hi
+        return math.isfinite(value) and above and below
+
+    def __str__(self) -> str:
+        return f"{'(' if self.lo_open else '['}{self.lo:g}, {self.hi:g}{')' if self.hi_open else ']'} {self.unit}"
+
+
+def _check_ranges(obj: object, ranges: Mapping[str, Range]) -> None:
+    for name, rng in ranges.items():
+        value = getattr(obj, name)
+        if not rng.contains(value):
+            raise InvalidParameterError(name, value, f"must be in {rng}")
+
+
 def _override(obj: _P, mapping: Mapping[str, Any]) -> _P:
     known = tuple(f.name for f in fields(obj))
     clean: dict[str, float] = {}
@@ -68,7 +100,10 @@ def _override(obj: _P, mapping: Mapping[str, Any]) -> _P:
             raise UnknownParameterError(str(name), known, type(obj).__name__)
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise InvalidParameterError(name, value, "expected a number")
-        clean[name] = float(value)
+        try:
+            clean[name] = float(value)
+        except OverflowError:  # an integer beyond the float range
+            raise InvalidParameterError(name, value, "expected a finite number") from None
     out = replace(obj, **clean)
     out.validate()
     return out
@@ -98,15 +133,9 @@ class BicycleParams:
     model follows the kinematic plan; it also keeps the linearised model near its point)."""
 
     def validate(self) -> None:
-        """Raise :class:`InvalidParameterError` on non-physical values."""
-        if self.l_f <= 0:
-            raise InvalidParameterError("l_f", self.l_f, "must be > 0")
-        if not 0 < self.delta_max < 1.5:
-            raise InvalidParameterError("delta_max", self.delta_max, "must be in (0, 1.5) rad")
-        if self.a_min >= 0 or self.a_max <= 0:
-            raise InvalidParameterError("a_min/a_max", (self.a_min, self.a_max), "need a_min < 0 < a_max")
-        if not self.a_lat_max > 0:
-            raise InvalidParameterError("a_lat_max", self.a_lat_max, "must be > 0")
+        """Raise :class:`InvalidParameterError` on a value outside its :data:`BICYCLE_RANGES`
+        (NaN and ±inf included)."""
+        _check_ranges(self, BICYCLE_RANGES)
 
     def with_overrides(self, mapping: Mapping[str, Any]) -> "BicycleParams":
         """A copy with the named fields replaced; unknown names raise :class:`UnknownParameterError`."""
@@ -212,23 +241,64 @@ class VehicleParams:
         return self.a + self.b
 
     def validate(self) -> None:
-        """Raise :class:`InvalidParameterError` on non-physical values."""
-        positive = ("m", "a", "b", "I_z", "T_f", "T_r", "R_w", "I_w", "length", "width", "mu",
-                    "B_x", "C_x", "D_x", "B_y", "C_y", "D_y", "v_low", "v_blend_width",
-                    "tau_kin", "tau_load", "h_int", "engine_force_max", "engine_power_max")
-        for name in positive:
-            if not getattr(self, name) > 0:
-                raise InvalidParameterError(name, getattr(self, name), "must be > 0")
-        for name in ("c_rr", "rho_air", "cd_area", "h_cg", "brake_torque_max"):
-            if getattr(self, name) < 0:
-                raise InvalidParameterError(name, getattr(self, name), "must be ≥ 0")
-        for name in ("rear_drive_share", "brake_friction_use", "load_sensitivity"):
-            if not 0 <= getattr(self, name) <= 1:
-                raise InvalidParameterError(name, getattr(self, name), "must be in [0, 1]")
-        if self.h_int > 0.02:
-            raise InvalidParameterError("h_int", self.h_int, "internal step above 20 ms is inaccurate")
+        """Raise :class:`InvalidParameterError` on a value outside its :data:`VEHICLE_RANGES`
+        (NaN and ±inf included)."""
+        _check_ranges(self, VEHICLE_RANGES)
 
     def with_overrides(self, mapping: Mapping[str, Any]) -> "VehicleParams":
         """A copy with the named fields replaced; unknown names raise :class:`UnknownParameterError`,
         bad values :class:`InvalidParameterError`."""
         return _override(self, mapping)
+
+
+BICYCLE_RANGES: Mapping[str, Range] = {
+    "l_f": Range(0.5, 10.0, "m"),
+    "delta_max": Range(0.0, 1.5, "rad", lo_open=True, hi_open=True),
+    "a_min": Range(-20.0, 0.0, "m/s²", hi_open=True),
+    "a_max": Range(0.0, 20.0, "m/s²", lo_open=True),
+    "v_max": Range(0.0, 100.0, "m/s", lo_open=True),
+    "a_lat_max": Range(0.0, 30.0, "m/s²", lo_open=True),
+}
+"""Physically valid values of every :class:`BicycleParams` field (a car: the wheelbase-like
+l_f of a city car to a bus; accelerations within what tyres deliver, μ ≤ 2)."""
+
+VEHICLE_RANGES: Mapping[str, Range] = {
+    "m": Range(100.0, 50_000.0, "kg"),
+    "a": Range(0.1, 10.0, "m"),
+    "b": Range(0.1, 10.0, "m"),
+    "I_z": Range(10.0, 1e6, "kg·m²"),
+    "T_f": Range(0.3, 5.0, "m"),
+    "T_r": Range(0.3, 5.0, "m"),
+    "h_cg": Range(0.0, 3.0, "m"),
+    "R_w": Range(0.1, 2.0, "m"),
+    "I_w": Range(0.01, 100.0, "kg·m²"),
+    "length": Range(0.0, 30.0, "m", lo_open=True),
+    "width": Range(0.0, 5.0, "m", lo_open=True),
+    "mu": Range(0.05, 2.0, "-"),
+    "B_x": Range(0.0, 100.0, "-", lo_open=True),
+    "C_x": Range(0.0, 5.0, "-", lo_open=True),
+    "D_x": Range(0.0, 5.0, "-", lo_open=True),
+    "E_x": Range(-10.0, 1.0, "-"),
+    "B_y": Range(0.0, 100.0, "1/rad", lo_open=True),
+    "C_y": Range(0.0, 5.0, "-", lo_open=True),
+    "D_y": Range(0.0, 5.0, "-", lo_open=True),
+    "E_y": Range(-10.0, 1.0, "-"),
+    "load_sensitivity": Range(0.0, 1.0, "-"),
+    "c_rr": Range(0.0, 1.0, "-"),
+    "rho_air": Range(0.0, 10.0, "kg/m³"),
+    "cd_area": Range(0.0, 20.0, "m²"),
+    "engine_force_max": Range(0.0, 1e6, "N", lo_open=True),
+    "engine_power_max": Range(0.0, 1e7, "W", lo_open=True),
+    "rear_drive_share": Range(0.0, 1.0, "-"),
+    "brake_torque_max": Range(0.0, 1e5, "N·m"),
+    "brake_friction_use": Range(0.0, 1.0, "-"),
+    "v_low": Range(0.01, 10.0, "m/s"),
+    "v_blend": Range(0.0, 20.0, "m/s"),
+    "v_blend_width": Range(0.01, 10.0, "m/s"),
+    "tau_kin": Range(0.001, 10.0, "s"),
+    "tau_load": Range(0.001, 10.0, "s"),
+    "h_int": Range(0.001, 0.02, "s"),
+}
+"""Physically valid values of every :class:`VehicleParams` field: a passenger car to a heavy
+truck (mass, inertias, geometry), Magic-Formula factors of real tyres (E ≤ 1), and numerics
+the integrator stays accurate with (an internal step of 1 to 20 ms)."""

@@ -38,5 +38,7 @@ YML424 = Code("YML424", "bad-parameter-reference", E, "A ${...} value that is no
 YML425 = Code("YML425", "unknown-parameter", E, "A value given for a parameter the scenario does not declare.")
 YML426 = Code("YML426", "parameter-range-invalid", W, "Some value within a parameter's range makes the scenario invalid.")
 YML427 = Code("YML427", "goal-out-of-reach", W, "The goal cannot be reached within the run (or its deadline) at the speed limits.")
+YML428 = Code("YML428", "duplicate-rule", E,
+              "Two rules of a scenario share a name: two rule files define it, or one file is listed twice.")
 
 __all__ = [name for name in dir() if name.startswith("YML")]

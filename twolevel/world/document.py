@@ -12,6 +12,7 @@ Imported by ``twolevel check``: standard library and PyYAML only.
 from __future__ import annotations
 
 import os
+import re
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -35,6 +36,9 @@ _TAG = "tag:yaml.org,2002:"
 _SCALAR_TAGS = {_TAG + t for t in ("str", "int", "float", "bool", "null")}
 _TIMESTAMP = _TAG + "timestamp"
 _MERGE = _TAG + "merge"
+# YAML 1.2's numbers that YAML 1.1 (PyYAML) reads as text: exponents without a dot or a sign
+# (1e-3, 1e5, 1.0e5). Plain (unquoted) scalars of this form are numbers, as the user meant.
+_FLOAT_12 = re.compile(r"[-+]?(\.[0-9]+|[0-9]+(\.[0-9]*)?)[eE][-+]?[0-9]+")
 
 Path_ = tuple[str | int, ...]
 
@@ -136,6 +140,8 @@ class _Builder:
             tag = node.tag.replace(_TAG, "!!")
             raise _Refused(YML407(f"tag '{tag}' is not allowed", _span(self.file, node),
                                   hint="python objects, binary data and custom tags are refused; write plain values"))
+        if node.tag == _TAG + "str" and not node.style and _FLOAT_12.fullmatch(node.value):  # plain: "" (libyaml) or None
+            return float(node.value)
         try:
             return self.scalars.construct_object(node, deep=True)
         except (yaml.YAMLError, ValueError) as exc:

@@ -23,11 +23,12 @@ from pydantic import BaseModel, ValidationError
 from twolevel.diagnostics import Diagnostic, Span
 from twolevel.world.codes import (
     YML410, YML411, YML412, YML413, YML414, YML415, YML416, YML417, YML418, YML419, YML420, YML421,
-    YML423,
+    YML423, YML428,
 )
 from twolevel.world.document import Document, Path_, read_document
+from twolevel.world.layout import check_layout, lane_lengths
 from twolevel.world.parameters import check_variants, explain, substitute
-from twolevel.world.schema import MapFile, ScenarioFile, lane_length
+from twolevel.world.schema import MAX_ROUTE_POINTS, MapFile, ScenarioFile
 
 __all__ = ["Map", "Scenario", "RuleFile", "load_map", "load_scenario", "check_world_file", "file_kind"]
 
@@ -113,11 +114,14 @@ def _model_at(root: type[BaseModel], loc: Path_) -> Any:
 
 
 def _description(root: type[BaseModel], loc: Path_) -> str:
-    parent = _model_at(root, loc[:-1]) if loc else None
-    if isinstance(parent, type) and issubclass(parent, BaseModel) and loc and isinstance(loc[-1], str):
-        field = parent.model_fields.get(loc[-1])
-        if field is not None and field.description:
-            return field.description
+    """The description of the field at ``loc``, or of the nearest field holding it (a point of a
+    polyline is described by ``points``, a vehicle override by ``vehicle``)."""
+    for n in range(len(loc), 0, -1):
+        parent = _model_at(root, loc[: n - 1])
+        if isinstance(parent, type) and issubclass(parent, BaseModel) and isinstance(loc[n - 1], str):
+            field = parent.model_fields.get(loc[n - 1])
+            if field is not None and field.description:
+                return field.description
     return ""
 
 
@@ -214,8 +218,8 @@ def _read_kind(path: Path, expected: Kind, referrer: Span | None,
     base = doc.data.get("extends") if expected == "scenario" else None
     if base is None:
         return doc, []
-    if not isinstance(base, str):
-        return doc, []  # the schema reports the type
+    if not isinstance(base, str) or not base or "\0" in base:
+        return doc, []  # the schema reports it
     at = doc.locate(("extends",), value=True)
     target = _resolve(base, at)
     if target in stack or target == path.resolve():
@@ -249,6 +253,14 @@ def _merge(base: Document, over: Document) -> Document:
     return Document(over.path, data, where)
 
 
+def _is_file(path: str | Path) -> bool:
+    """Whether ``path`` is a regular file; False for a name the system refuses (too long, …)."""
+    try:
+        return Path(path).is_file()
+    except (OSError, ValueError):  # ENAMETOOLONG and the like; ValueError: a NUL in the name
+        return False
+
+
 def _display(path: Path) -> str:
     try:
         rel = os.path.relpath(path)
@@ -276,11 +288,6 @@ def _check_ids(items: list[tuple[str, Path_]], doc: Document, what: str) -> list
         else:
             seen[ident] = loc
     return out
-
-
-def lane_lengths(spec: MapFile) -> dict[str, float]:
-    """Length [m] of every lane of the map by id (pure Python)."""
-    return {lane.id: lane_length(road, lane.offset) for road in spec.roads for lane in road.lane_specs()}
 
 
 def successors(spec: MapFile) -> dict[str, list[str]]:
@@ -368,11 +375,18 @@ def _check_route_length(spec: ScenarioFile, lanes: list[str], lengths: dict[str,
     r = spec.route
     length = route_length(spec, lanes, lengths)
     least = max(MIN_ROUTE_LENGTH, r.spacing)
-    if length >= least:
-        return []
-    return [YML420(f"the route from start to goal is {length:g} m long; it must be at least {least:g} m",
-                   doc.locate(("route", "goal", "s"), value=True),
-                   hint="the goal is (almost) at the start: move it further along the lanes")]
+    if length < least:
+        return [YML420(f"the route from start to goal is {length:g} m long; it must be at least {least:g} m",
+                       doc.locate(("route", "goal", "s"), value=True),
+                       hint="the goal is (almost) at the start: move it further along the lanes")]
+    points = length / r.spacing
+    if points > MAX_ROUTE_POINTS:
+        where = ("route", "spacing") if ("route", "spacing") in doc.where else ("route", "goal", "s")
+        return [YML420(f"the route is {length:.6g} m long: at a spacing of {r.spacing:g} m that is {points:.3g} "
+                       f"reference points, more than the {MAX_ROUTE_POINTS} allowed",
+                       doc.locate(where, value=True),
+                       hint=f"raise 'route.spacing' to at least {length / MAX_ROUTE_POINTS:.3g} m, or shorten the route")]
+    return []
 
 
 def _check_scenario(spec: ScenarioFile, doc: Document, m: MapFile) -> list[Diagnostic]:
@@ -396,7 +410,7 @@ def _check_scenario(spec: ScenarioFile, doc: Document, m: MapFile) -> list[Diagn
             out.append(YML420(f"no way from lane '{r.start.lane}' to lane '{r.goal.lane}' along lane successors",
                               doc.locate(("route", "goal", "lane"), value=True), hint="add 'successors' in the map or give 'via'"))
         elif r.via is not None:
-            if lanes[0] != r.start.lane or lanes[-1] != r.goal.lane:
+            if not lanes or lanes[0] != r.start.lane or lanes[-1] != r.goal.lane:
                 out.append(YML420("'via' must begin with the start lane and end with the goal lane",
                                   doc.locate(("route", "via"), value=True)))
             for k, (x, y) in enumerate(zip(lanes, lanes[1:])):
@@ -468,7 +482,9 @@ def _check_assumptions(spec: ScenarioFile, doc: Document, known: list[str]) -> l
 def _check_vehicle(spec: ScenarioFile, doc: Document) -> list[Diagnostic]:
     """Ego vehicle-parameter overrides name real parameters of the bicycle (``l_f``) or the
     detailed model, with physically valid values (twolevel/models/params.py decides)."""
-    from twolevel.models.params import BicycleParams, InvalidParameterError, UnknownParameterError, VehicleParams
+    from twolevel.models.params import (
+        BICYCLE_RANGES, VEHICLE_RANGES, BicycleParams, InvalidParameterError, UnknownParameterError, VehicleParams,
+    )
 
     out: list[Diagnostic] = []
     bicycle_names = {f for f in BicycleParams.__dataclass_fields__}
@@ -484,7 +500,50 @@ def _check_vehicle(spec: ScenarioFile, doc: Document) -> list[Diagnostic]:
             out.append(YML411(f"unknown vehicle parameter '{name}'", doc.locate(loc),
                               hint=hint or f"known parameters: {', '.join(known)}"))
         except InvalidParameterError as exc:
-            out.append(YML414(f"vehicle parameter '{name}' = {value!r}: {exc.reason}", doc.locate(loc, value=True)))
+            unit = (BICYCLE_RANGES if name in bicycle_names else VEHICLE_RANGES)[name].unit
+            out.append(YML414(f"vehicle parameter '{name}' = {value!r}: {exc.reason}", doc.locate(loc, value=True),
+                              hint=f"the default is {getattr(target, name):g} {unit} "
+                                   f"({type(target).__name__} in twolevel/models/params.py says what it means)"))
+    return out
+
+
+def _rule_names(path: str) -> list[tuple[str, Span]]:
+    """The rules ``path`` defines, with where each name is; none if it cannot be read or parsed
+    (its own diagnostics say why)."""
+    from twolevel.stl.parser import parse  # lazy: no numpy, but only scenarios with rules need it
+    from twolevel.stl.source import read_source
+
+    shown = _display(Path(path))
+    text, _ = read_source(shown)
+    rulefile = parse(text, shown)[0] if text is not None else None
+    if rulefile is None:
+        return []
+    return [(r.name, r.name_span or Span.whole_file(shown)) for r in rulefile.rules]
+
+
+def _check_rule_names(rules: Iterable[RuleFile]) -> list[Diagnostic]:
+    """YML428 at a scenario's rule entry that repeats a file, or whose file defines a rule another
+    entry's file already defines: a scenario's rules share one name space (each is a trace
+    column ``rob_<name>``, a monitor verdict and a constraint group of the MPC)."""
+    out: list[Diagnostic] = []
+    listed: dict[str, RuleFile] = {}
+    defined: dict[str, Span] = {}
+    for rf in rules:
+        if not _is_file(rf.path):
+            continue  # reported as a missing file
+        if rf.path in listed:
+            first = listed[rf.path].span
+            out.append(YML428(f"{_display(Path(rf.path))} is listed twice (first at {first.file}:{first.line})", rf.span,
+                              hint="list each rule file once; to check a rule at other constants, copy it under another name"))
+            continue
+        listed[rf.path] = rf
+        for name, span in _rule_names(rf.path):
+            first_def = defined.setdefault(name, span)
+            if first_def is not span:
+                out.append(YML428(
+                    f"rule '{name}' is defined twice: at {first_def.file}:{first_def.line} and at {span.file}:{span.line}",
+                    rf.span, hint="rule names are unique across a scenario's rule files: rename one of the rules, "
+                                  "or leave out the file that repeats it"))
     return out
 
 
@@ -506,6 +565,7 @@ def _load_map(path: Path, referrer: Span | None) -> tuple[Map | None, list[Diagn
     if spec is None:
         return None, diags + vdiags
     cdiags = _check_map(spec, doc)
+    cdiags += check_layout(spec, doc)
     return (None if any(d.is_error for d in cdiags) else Map(spec, doc.path)), diags + cdiags
 
 
@@ -541,9 +601,10 @@ def load_scenario(path: str | os.PathLike[str], parameters: Mapping[str, float] 
     for i, ref in enumerate(spec.rules):
         at = doc.locate(("rules", i, "file"), value=True) if ("rules", i, "file") in doc.where else doc.locate(("rules", i), value=True)
         target = _resolve(ref.file, at)
-        if not target.is_file():
+        if not _is_file(target):
             diags.append(YML418(f"rule file not found: {ref.file}", at, hint="paths are relative to the scenario file"))
         rules.append(RuleFile(str(target), tuple(sorted(ref.constants.items())), at))
+    diags += _check_rule_names(rules)
     if m is None:
         return None, diags
     diags += explain(_check_scenario(spec, doc, m.spec), sub) + check_variants(spec, doc)
@@ -578,7 +639,7 @@ def check_world_file(path: str | os.PathLike[str]) -> list[Diagnostic]:
 
 def _lint_rules(rule_files: Iterable[RuleFile], spec: ScenarioFile) -> list[Diagnostic]:
     out: list[Diagnostic] = []
-    files = [rf for rf in rule_files if Path(rf.path).is_file()]
+    files = [rf for rf in rule_files if _is_file(rf.path)]
     if not files:
         return out
     try:

@@ -1,7 +1,12 @@
 """The YAML schemas of maps and scenarios (pydantic v2, the I/O boundary only).
 
-Everything the user writes is validated here and nowhere else; the runtime works on frozen
-dataclasses and numpy arrays built from these models (:mod:`twolevel.world.world`).
+Every value the user writes is validated here, each on its own: numbers are numbers (not
+``true`` or quoted text), finite (NaN and ±inf are refused everywhere, by the models' config) and
+within a physical range (coordinates within :data:`COORD_MAX`, times within :data:`TIME_MAX`, …).
+What takes several values together — positions along lanes, the layout of roads and lanes,
+routes, unique ids and rule names, vehicle parameters — the loader checks
+(:mod:`twolevel.world.loader`, :mod:`twolevel.world.layout`). The runtime works on frozen
+dataclasses and numpy arrays built from the validated models (:mod:`twolevel.world.world`).
 Conventions: lengths in metres, speeds in m/s, times in seconds, **angles in degrees** (headings
 are measured counter-clockwise from the x axis; a positive arc angle turns left). A lateral offset
 is positive to the left of the direction the road is drawn in.
@@ -15,26 +20,60 @@ Imported by ``twolevel check``: pydantic and the standard library only (no numpy
 
 from __future__ import annotations
 
-import math
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, Strict, field_validator, model_validator
 
 __all__ = [
     "Arc", "Segment", "StartPose", "LaneSpec", "Road", "SpeedLimitSign", "StopSign", "LightCycle",
     "LightStep", "TrafficLight", "MapFile", "LanePos", "Placement", "Box", "Ego", "RouteSpec",
     "IDMParams", "Waypoint", "Participant", "Population", "RuleRef", "ControllerSettings",
-    "RunSettings", "ScenarioFile", "segment_length", "lane_length", "KMH",
+    "RunSettings", "ScenarioFile", "KMH", "Number", "Count", "COORD_MAX",
+    "TIME_MAX", "CONST_MAX", "SEED_MAX", "S_MAX", "MIN_PIECE", "MIN_SPACING", "MAX_ROUTE_POINTS",
     "UserBoundsSpec", "PedestrianBoundsSpec", "ResponseSpec", "AssumptionsSpec",
     "GoalCriterion", "RoadCriterion", "Expect", "NormalDist", "Parameter", "Variant",
 ]
 
 KMH = 1.0 / 3.6  # [m/s] per km/h
 IDM_V0_MAX = 120.0 * KMH  # [m/s] Treiber's desired speed, capped further by the lane's limit
+COORD_MAX = 1e6  # [m] largest |x|, |y| of any point (a map 2000 km across)
+TIME_MAX = 86_400.0  # [s] latest time in a light's script or a participant's waypoints (a day)
+CONST_MAX = 1e6  # largest |value| a rule constant is bound to (metres, seconds, m/s: far beyond any)
+SEED_MAX = 2**63 - 1  # largest seed (a 64-bit signed integer)
+S_MAX = 1e7  # [m] largest distance along a lane (checked against the lane's length too)
+MIN_PIECE = 0.01  # [m] shortest road segment, and least distance between consecutive polyline points
+MIN_SPACING = 0.1  # [m] closest spacing of a route's reference points
+MAX_ROUTE_POINTS = 20_000  # most reference points of a route (10 km at the default spacing)
+
+Number = Annotated[float, Strict()]
+"""A YAML number (an integer is fine). ``true``/``false`` and quoted text are refused; NaN and ±inf
+are refused by every model's ``allow_inf_nan=False`` (a range such as ``ge=0`` alone would let
++inf through, and one without a bound lets NaN through)."""
+Count = Annotated[int, Strict()]
+"""A YAML integer; ``true``/``false``, ``2.5`` and quoted text are refused."""
+
+
+def _usable_path(text: str) -> str:
+    if "\0" in text:
+        raise ValueError("a path cannot contain a NUL character")
+    return text
+
+
+FilePath = Annotated[str, Field(min_length=1, max_length=4096), AfterValidator(_usable_path)]
+"""A path of another file, relative to the file that names it (no NUL character)."""
+Coord = Annotated[Number, Field(ge=-COORD_MAX, le=COORD_MAX)]
+"""A coordinate [m] of a point in the plane."""
+Along = Annotated[Number, Field(ge=0, le=S_MAX)]
+"""A distance along a lane [m]."""
+Speed = Annotated[Number, Field(ge=0, le=100)]
+"""A speed [m/s]."""
 
 
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    """Every model of a map or scenario: unknown keys refused, values immutable, and every
+    number finite (NaN and ±inf are refused wherever a number goes, nested ones included)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 # ----------------------------------------------------------------------------------- maps
@@ -43,8 +82,8 @@ class _Model(BaseModel):
 class Arc(_Model):
     """A circular arc continuing tangentially from the end of the previous segment."""
 
-    radius: float = Field(gt=0, le=1e5, description="radius of the arc [m]")
-    angle: float = Field(ge=-360, le=360, description="turning angle [deg], positive turns left")
+    radius: Number = Field(gt=0, le=1e5, description="radius of the arc [m]")
+    angle: Number = Field(ge=-360, le=360, description="turning angle [deg], positive turns left")
 
     @model_validator(mode="after")
     def _nonzero(self) -> "Arc":
@@ -56,9 +95,9 @@ class Arc(_Model):
 class Segment(_Model):
     """One piece of a road's reference line: exactly one of ``line``, ``arc``, ``points``."""
 
-    line: float | None = Field(default=None, gt=0, le=1e5, description="straight piece of this length [m]")
+    line: Number | None = Field(default=None, ge=MIN_PIECE, le=1e5, description="straight piece of this length [m]")
     arc: Arc | None = Field(default=None, description="circular arc {radius [m], angle [deg]}")
-    points: list[tuple[float, float]] | None = Field(
+    points: list[tuple[Coord, Coord]] | None = Field(
         default=None, min_length=1, description="polyline through these absolute points [[x, y], …] [m]"
     )
 
@@ -73,21 +112,21 @@ class Segment(_Model):
 class StartPose(_Model):
     """Where a road's reference line starts."""
 
-    x: float = Field(default=0.0, description="x [m]")
-    y: float = Field(default=0.0, description="y [m]")
-    heading: float = Field(default=0.0, ge=-360, le=360, description="direction of the first segment [deg]")
+    x: Coord = Field(default=0.0, description="x [m]")
+    y: Coord = Field(default=0.0, description="y [m]")
+    heading: Number = Field(default=0.0, ge=-360, le=360, description="direction of the first segment [deg]")
 
 
 class LaneSpec(_Model):
     """A lane: the road's reference line shifted sideways, driven in one direction."""
 
     id: str = Field(min_length=1, description="lane id, unique in the map")
-    offset: float = Field(default=0.0, ge=-50, le=50, description="lateral offset from the reference line [m], + left")
-    width: float = Field(default=3.5, gt=0, le=10, description="lane width [m]")
+    offset: Number = Field(default=0.0, ge=-50, le=50, description="lateral offset from the reference line [m], + left")
+    width: Number = Field(default=3.5, gt=0, le=10, description="lane width [m]")
     direction: Literal["forward", "backward"] = Field(
         default="forward", description="'forward': traffic drives the way the road is drawn; 'backward': against it"
     )
-    speed_limit: float | None = Field(default=None, gt=0, le=100, description="limit from the lane's start [m/s]")
+    speed_limit: Number | None = Field(default=None, gt=0, le=100, description="limit from the lane's start [m/s]")
     successors: list[str] = Field(default_factory=list, description="ids of lanes traffic continues into")
 
 
@@ -111,8 +150,8 @@ class SpeedLimitSign(_Model):
 
     id: str = Field(min_length=1, description="sign id")
     lane: str = Field(description="lane the sign applies to")
-    s: float = Field(ge=0, description="position along the lane, in its direction of travel [m]")
-    value: float = Field(gt=0, le=100, description="the limit [m/s] (50 km/h = 13.89 m/s)")
+    s: Along = Field(description="position along the lane, in its direction of travel [m]")
+    value: Number = Field(gt=0, le=100, description="the limit [m/s] (50 km/h = 13.89 m/s)")
 
 
 class StopSign(_Model):
@@ -120,23 +159,23 @@ class StopSign(_Model):
 
     id: str = Field(min_length=1, description="sign id")
     lane: str = Field(description="lane whose traffic must stop")
-    s: float = Field(ge=0, description="stop line position along the lane [m]")
-    stop_time: float = Field(default=1.0, ge=0, le=600, description="required standstill before the line [s]")
+    s: Along = Field(description="stop line position along the lane [m]")
+    stop_time: Number = Field(default=1.0, ge=0, le=600, description="required standstill before the line [s]")
 
 
 class LightCycle(_Model):
     """A fixed-time cycle green → yellow → red, repeating."""
 
-    green: float = Field(gt=0, le=3600, description="green phase [s]")
-    yellow: float = Field(default=3.0, ge=0, le=60, description="yellow phase [s]")
-    red: float = Field(gt=0, le=3600, description="red phase [s]")
-    offset: float = Field(default=0.0, ge=0, description="time into the cycle at t = 0 [s]")
+    green: Number = Field(gt=0, le=3600, description="green phase [s]")
+    yellow: Number = Field(default=3.0, ge=0, le=60, description="yellow phase [s]")
+    red: Number = Field(gt=0, le=3600, description="red phase [s]")
+    offset: Number = Field(default=0.0, ge=0, le=TIME_MAX, description="time into the cycle at t = 0 [s]")
 
 
 class LightStep(_Model):
     """From time ``t`` on the light shows ``state`` (until the next step)."""
 
-    t: float = Field(ge=0, description="time [s]")
+    t: Number = Field(ge=0, le=TIME_MAX, description="time [s]")
     state: Literal["green", "yellow", "red"] = Field(description="green, yellow or red")
 
 
@@ -145,7 +184,7 @@ class TrafficLight(_Model):
 
     id: str = Field(min_length=1, description="light id")
     lane: str = Field(description="lane the light controls")
-    s: float = Field(ge=0, description="stop line position along the lane [m]")
+    s: Along = Field(description="stop line position along the lane [m]")
     cycle: LightCycle | None = Field(default=None, description="fixed-time cycle {green, yellow, red, offset} [s]")
     script: list[LightStep] | None = Field(default=None, min_length=1, description="scripted states [{t [s], state}]")
 
@@ -167,7 +206,7 @@ class MapFile(_Model):
 
     kind: Literal["map"] = Field(default="map", description="'map'")
     name: str = Field(default="", description="a name for reports")
-    default_speed_limit: float = Field(default=50 * KMH, gt=0, le=100, description="limit where no sign says otherwise [m/s]")
+    default_speed_limit: Number = Field(default=50 * KMH, gt=0, le=100, description="limit where no sign says otherwise [m/s]")
     roads: list[Road] = Field(min_length=1, description="the roads")
     speed_limits: list[SpeedLimitSign] = Field(default_factory=list, description="speed-limit signs")
     stop_signs: list[StopSign] = Field(default_factory=list, description="stop signs")
@@ -181,18 +220,18 @@ class LanePos(_Model):
     """A position given along a lane."""
 
     lane: str = Field(description="lane id")
-    s: float = Field(default=0.0, ge=0, description="distance along the lane [m]")
+    s: Along = Field(default=0.0, description="distance along the lane [m]")
 
 
 class Placement(_Model):
     """A pose: either on a lane (``lane``, ``s``, ``lateral``) or free (``x``, ``y``, ``heading``)."""
 
     lane: str | None = Field(default=None, description="lane id")
-    s: float | None = Field(default=None, ge=0, description="distance along the lane [m]")
-    lateral: float = Field(default=0.0, ge=-20, le=20, description="offset from the lane centre [m], + left")
-    x: float | None = Field(default=None, description="x [m]")
-    y: float | None = Field(default=None, description="y [m]")
-    heading: float | None = Field(default=None, ge=-360, le=360, description="heading [deg]")
+    s: Along | None = Field(default=None, description="distance along the lane [m]")
+    lateral: Number = Field(default=0.0, ge=-20, le=20, description="offset from the lane centre [m], + left")
+    x: Coord | None = Field(default=None, description="x [m]")
+    y: Coord | None = Field(default=None, description="y [m]")
+    heading: Number | None = Field(default=None, ge=-360, le=360, description="heading [deg]")
 
     @model_validator(mode="after")
     def _one_form(self) -> "Placement":
@@ -208,19 +247,19 @@ class Placement(_Model):
 class Box(_Model):
     """A vehicle's bounding box, centred on its reference point."""
 
-    length: float = Field(default=4.22, gt=0, le=30, description="length [m]")
-    width: float = Field(default=1.8, gt=0, le=5, description="width [m]")
+    length: Number = Field(default=4.22, gt=0, le=30, description="length [m]")
+    width: Number = Field(default=1.8, gt=0, le=5, description="width [m]")
 
 
 class Ego(_Model):
     """The controlled vehicle."""
 
     start: Placement = Field(description="initial pose")
-    speed: float = Field(default=0.0, ge=0, le=100, description="initial speed [m/s]")
+    speed: Number = Field(default=0.0, ge=0, le=100, description="initial speed [m/s]")
     box: Box = Field(default_factory=Box, description="bounding box [m]")
-    desired_speed: float | None = Field(default=None, gt=0, le=100, description="cap on the desired speed [m/s]")
-    vehicle: dict[str, float] = Field(
-        default_factory=dict, description="vehicle-parameter overrides (e.g. l_f [m]), validated by the models package"
+    desired_speed: Number | None = Field(default=None, gt=0, le=100, description="cap on the desired speed [m/s]")
+    vehicle: dict[str, Number] = Field(
+        default_factory=dict, description="vehicle-parameter overrides by name (l_f, a_max, mu, …), each checked against its physical range (twolevel/models/params.py)"
     )
 
 
@@ -229,28 +268,28 @@ class RouteSpec(_Model):
 
     start: LanePos = Field(description="A: {lane, s [m]}")
     goal: LanePos = Field(description="B: {lane, s [m]}")
-    via: list[str] | None = Field(default=None, description="lanes from A's to B's, inclusive; default: shortest by successors")
-    spacing: float = Field(default=0.5, gt=0, le=10, description="distance between reference points [m]")
+    via: list[str] | None = Field(default=None, min_length=1, max_length=1000, description="lanes from A's to B's, inclusive; default: shortest by successors")
+    spacing: Number = Field(default=0.5, ge=MIN_SPACING, le=10, description="distance between reference points [m]")
     stop_at_goal: bool = Field(default=True, description="desired speed falls to 0 at B")
 
 
 class IDMParams(_Model):
     """Intelligent Driver Model parameters (Treiber, Hennecke, Helbing 2000)."""
 
-    v0: float | None = Field(default=None, gt=0, le=100, description="desired speed [m/s]; default min(120 km/h, lane limit)")
-    T: float = Field(default=1.6, gt=0, le=10, description="time headway [s]")
-    s0: float = Field(default=2.0, ge=0, le=50, description="jam distance [m]")
-    a: float = Field(default=0.73, gt=0, le=10, description="maximum acceleration [m/s²]")
-    b: float = Field(default=1.67, gt=0, le=10, description="comfortable deceleration [m/s²]")
-    delta: float = Field(default=4.0, gt=0, le=10, description="acceleration exponent [-]")
+    v0: Number | None = Field(default=None, gt=0, le=100, description="desired speed [m/s]; default min(120 km/h, lane limit)")
+    T: Number = Field(default=1.6, gt=0, le=10, description="time headway [s]")
+    s0: Number = Field(default=2.0, ge=0, le=50, description="jam distance [m]")
+    a: Number = Field(default=0.73, gt=0, le=10, description="maximum acceleration [m/s²]")
+    b: Number = Field(default=1.67, gt=0, le=10, description="comfortable deceleration [m/s²]")
+    delta: Number = Field(default=4.0, gt=0, le=10, description="acceleration exponent [-]")
 
 
 class Waypoint(_Model):
     """A scripted participant is at (x, y) at time t; linear in between."""
 
-    t: float = Field(ge=0, description="time [s]")
-    x: float = Field(description="x [m]")
-    y: float = Field(description="y [m]")
+    t: Number = Field(ge=0, le=TIME_MAX, description="time [s]")
+    x: Coord = Field(description="x [m]")
+    y: Coord = Field(description="y [m]")
 
 
 Behaviour = Literal["stationary", "constant_velocity", "idm", "scripted"]
@@ -262,7 +301,7 @@ class Participant(_Model):
     id: str = Field(min_length=1, description="participant id")
     behaviour: Behaviour = Field(description="stationary, constant_velocity, idm or scripted")
     start: Placement | None = Field(default=None, description="initial pose (not for scripted)")
-    speed: float = Field(default=0.0, ge=0, le=100, description="initial speed [m/s]")
+    speed: Number = Field(default=0.0, ge=0, le=100, description="initial speed [m/s]")
     box: Box = Field(default_factory=Box, description="bounding box [m]")
     idm: IDMParams = Field(default_factory=IDMParams, description="IDM parameters (behaviour idm)")
     waypoints: list[Waypoint] | None = Field(default=None, min_length=2, description="[{t [s], x [m], y [m]}] (scripted)")
@@ -287,15 +326,15 @@ class Population(_Model):
     """``count`` vehicles spread over lanes, placed deterministically from a seed."""
 
     id: str = Field(min_length=1, description="prefix of the generated ids (id-0, id-1, …)")
-    count: int = Field(ge=1, le=5000, description="number of vehicles")
+    count: Count = Field(ge=1, le=5000, description="number of vehicles")
     lanes: list[str] = Field(min_length=1, description="lanes to place them on")
-    s_range: tuple[float, float] | None = Field(default=None, description="[from, to] along each lane [m]; default whole lane")
-    speed_range: tuple[float, float] = Field(default=(20.0, 30.0), description="initial speeds drawn uniformly [m/s]")
+    s_range: tuple[Along, Along] | None = Field(default=None, description="[from, to] along each lane [m]; default whole lane")
+    speed_range: tuple[Speed, Speed] = Field(default=(20.0, 30.0), description="initial speeds drawn uniformly [m/s]")
     behaviour: Literal["stationary", "constant_velocity", "idm"] = Field(default="idm", description="behaviour of all")
-    min_gap: float = Field(default=8.0, ge=0, le=500, description="minimum bumper-to-bumper gap when placing [m]")
+    min_gap: Number = Field(default=8.0, ge=0, le=500, description="minimum bumper-to-bumper gap when placing [m]")
     box: Box = Field(default_factory=Box, description="bounding box of each [m]")
     idm: IDMParams = Field(default_factory=IDMParams, description="IDM parameters")
-    seed: int | None = Field(default=None, ge=0, description="placement seed; default: the run's seed")
+    seed: Count | None = Field(default=None, ge=0, le=SEED_MAX, description="placement seed; default: the run's seed")
 
     @model_validator(mode="after")
     def _ranges(self) -> "Population":
@@ -309,9 +348,9 @@ class Population(_Model):
 class RuleRef(_Model):
     """A rule file and the values of its constants."""
 
-    file: str = Field(min_length=1, description="path of the .stl file, relative to the scenario")
-    constants: dict[str, Annotated[float, Field(allow_inf_nan=False)]] = Field(
-        default_factory=dict, description="constant name → value (a finite number)")
+    file: FilePath = Field(description="path of the .stl file, relative to the scenario")
+    constants: dict[str, Annotated[Number, Field(ge=-CONST_MAX, le=CONST_MAX)]] = Field(
+        default_factory=dict, description=f"constant name → value (a finite number, at most {CONST_MAX:g} in size)")
 
     @model_validator(mode="before")
     @classmethod
@@ -322,23 +361,23 @@ class RuleRef(_Model):
 class ControllerSettings(_Model):
     """The two-level controller's settings; defaults are the paper's."""
 
-    H: int = Field(default=10, ge=1, le=200, description="MPC horizon [steps]")
-    dt: float = Field(default=0.1, gt=0, le=1, description="control period [s]")
-    r_near: float = Field(default=10.0, gt=0, le=500, description="sensing radius for nearby vehicles, signs, lights [m]")
-    r: float = Field(default=0.3, gt=0, le=10, description="radius of the ball sampled around u* by the low level [-]")
-    D_safe: float = Field(default=1.0, ge=0, le=50, description="collision_free distance at the high level [m]")
-    samples: int = Field(default=200, ge=0, le=100000, description="low-level sampling budget [controls]")
-    time_limit: float = Field(default=0.1, gt=0, le=60, description="solver time limit per step [s]")
+    H: Count = Field(default=10, ge=1, le=200, description="MPC horizon [steps]")
+    dt: Number = Field(default=0.1, gt=0, le=1, description="control period [s]")
+    r_near: Number = Field(default=10.0, gt=0, le=500, description="sensing radius for nearby vehicles, signs, lights [m]")
+    r: Number = Field(default=0.3, gt=0, le=10, description="radius of the ball sampled around u* by the low level [-]")
+    D_safe: Number = Field(default=1.0, ge=0, le=50, description="collision_free distance at the high level [m]")
+    samples: Count = Field(default=200, ge=0, le=100000, description="low-level sampling budget [controls]")
+    time_limit: Number = Field(default=0.1, gt=0, le=60, description="solver time limit per step [s]")
     solver: Literal["modes", "highs"] = Field(default="modes", description="'modes' (mode search, Clarabel) or 'highs' (MILP)")
-    stop_speed: float = Field(default=0.1, gt=0, le=5, description="speed counted as standing still [m/s]")
-    yellow_decel: float = Field(default=3.0, gt=0, le=15, description="deceleration that decides 'can stop at yellow' [m/s²]")
+    stop_speed: Number = Field(default=0.1, gt=0, le=5, description="speed counted as standing still [m/s]")
+    yellow_decel: Number = Field(default=3.0, gt=0, le=15, description="deceleration that decides 'can stop at yellow' [m/s²]")
 
 
 class RunSettings(_Model):
     """The closed-loop run."""
 
-    duration: float = Field(default=60.0, gt=0, le=36000, description="simulated time [s]")
-    seed: int = Field(default=0, ge=0, description="seed of every random choice")
+    duration: Number = Field(default=60.0, gt=0, le=36000, description="simulated time [s]")
+    seed: Count = Field(default=0, ge=0, le=SEED_MAX, description="seed of every random choice")
 
 
 _ASSUMPTIONS = "defaults and sources: twolevel/world/assumptions.py"
@@ -351,10 +390,10 @@ def _bound(gt: float, le: float, what: str) -> Any:
 class UserBoundsSpec(_Model):
     """Assumed bounds of vehicles or cyclists; what is left out keeps its default."""
 
-    v_max: float | None = _bound(0, 150, "speed bound [m/s]; default vehicle 83.33, cyclist 12.5")
-    speed_factor: float | None = _bound(0, 10, "v ≤ speed_factor · limit in force [-]; default vehicle 1.2, cyclist none")
-    a_max: float | None = _bound(0, 30, "largest |acceleration|, braking and driving [m/s²]; default vehicle 8, cyclist 6")
-    v_switch: float | None = _bound(0, 100, "above it drive acceleration ≤ a_max·v_switch/v [m/s]; default 7.319, cyclist 2")
+    v_max: Number | None = _bound(0, 150, "speed bound [m/s]; default vehicle 83.33, cyclist 12.5")
+    speed_factor: Number | None = _bound(0, 10, "v ≤ speed_factor · limit in force [-]; default vehicle 1.2, cyclist none")
+    a_max: Number | None = _bound(0, 30, "largest |acceleration|, braking and driving [m/s²]; default vehicle 8, cyclist 6")
+    v_switch: Number | None = _bound(0, 100, "above it drive acceleration ≤ a_max·v_switch/v [m/s]; default 7.319, cyclist 2")
     lane_changes: bool | None = Field(default=None, description="may move to parallel lanes of its direction; default true")
     stop_lines: bool | None = Field(default=None, description="stops at stop signs' lines it can stop for; default true")
     red_lights: bool | None = Field(default=None, description="does not cross a red light it can stop for; default true")
@@ -363,17 +402,17 @@ class UserBoundsSpec(_Model):
 class PedestrianBoundsSpec(_Model):
     """Assumed bounds of pedestrians (any heading, not lane-bound)."""
 
-    v_max: float | None = _bound(0, 15, "speed bound [m/s]; default 2")
-    a_max: float | None = _bound(0, 15, "largest |acceleration| [m/s²]; default 0.6")
+    v_max: Number | None = _bound(0, 15, "speed bound [m/s]; default 2")
+    a_max: Number | None = _bound(0, 15, "largest |acceleration| [m/s²]; default 0.6")
 
 
 class ResponseSpec(_Model):
     """RSS's response of other road users (followers keep this distance behind the ego)."""
 
-    time: float | None = _bound(0, 10, "response time ρ [s]; default 2")
-    accel_max: float | None = _bound(0, 30, "acceleration during the response [m/s²]; default 3.5")
-    brake_min: float | None = _bound(0, 30, "braking at least, after the response [m/s²]; default 4")
-    brake_max: float | None = _bound(0, 30, "braking at most of the vehicle ahead [m/s²]; default 8")
+    time: Number | None = _bound(0, 10, "response time ρ [s]; default 2")
+    accel_max: Number | None = _bound(0, 30, "acceleration during the response [m/s²]; default 3.5")
+    brake_min: Number | None = _bound(0, 30, "braking at least, after the response [m/s²]; default 4")
+    brake_max: Number | None = _bound(0, 30, "braking at most of the vehicle ahead [m/s²]; default 8")
 
 
 class AssumptionsSpec(_Model):
@@ -389,7 +428,7 @@ class AssumptionsSpec(_Model):
 
 # ------------------------------------------------- pass criteria, parameters and variants
 
-Finite = Annotated[float, Field(allow_inf_nan=False)]
+Finite = Number  # a number (not true or text), finite like every number of a scenario
 
 
 def _switch(value: Any) -> Any:
@@ -505,8 +544,8 @@ class ScenarioFile(_Model):
 
     kind: Literal["scenario"] = Field(default="scenario", description="'scenario'")
     name: str = Field(default="", description="a name for reports")
-    extends: str | None = Field(default=None, description="a base scenario this one overrides (relative path)")
-    map: str = Field(min_length=1, description="path of the map, relative to this file")
+    extends: FilePath | None = Field(default=None, description="a base scenario this one overrides (relative path)")
+    map: FilePath = Field(description="path of the map, relative to this file")
     ego: Ego = Field(description="the controlled vehicle")
     route: RouteSpec = Field(description="route from A to B")
     participants: list[Participant] = Field(default_factory=list, description="other traffic, one by one")
@@ -526,50 +565,3 @@ class ScenarioFile(_Model):
         if bad:
             raise ValueError(f"parameter names must be identifiers (letters, digits, _): {', '.join(bad)}")
         return value
-
-
-# ------------------------------------------------ pure-Python lengths (no numpy: check path)
-
-
-def segment_length(seg: Segment, offset: float, start: tuple[float, float]) -> tuple[float, tuple[float, float]]:
-    """Length [m] of ``seg`` at lateral ``offset`` [m] and the end point of its reference line.
-
-    ``start`` is where the reference line is when the segment begins (needed for ``points``).
-    For arcs the length at an offset is exact, |R − offset·sign(angle)|·|angle|; polylines
-    ignore the small corner corrections of an offset line.
-    """
-    if seg.line is not None:
-        return seg.line, start  # end point not needed for straight pieces' lengths
-    if seg.arc is not None:
-        theta = math.radians(abs(seg.arc.angle))
-        radius = seg.arc.radius - offset * (1.0 if seg.arc.angle > 0 else -1.0)
-        return abs(radius) * theta, start
-    pts = [start, *seg.points] if seg.points else [start]
-    total = sum(math.dist(a, b) for a, b in zip(pts, pts[1:]))
-    return total, pts[-1]
-
-
-def lane_length(road: Road, offset: float) -> float:
-    """Length [m] of a lane of ``road`` at lateral ``offset`` (approximate for polylines)."""
-    # Track the reference line's end point only as far as polylines need it.
-    x, y, h = road.start.x, road.start.y, math.radians(road.start.heading)
-    total = 0.0
-    for seg in road.segments:
-        length, _ = segment_length(seg, offset, (x, y))
-        total += length
-        if seg.line is not None:
-            x, y = x + seg.line * math.cos(h), y + seg.line * math.sin(h)
-        elif seg.arc is not None:
-            th = math.radians(seg.arc.angle)
-            sign = 1.0 if th > 0 else -1.0
-            cx, cy = x - sign * seg.arc.radius * math.sin(h), y + sign * seg.arc.radius * math.cos(h)
-            h2 = h + th
-            x, y = cx + sign * seg.arc.radius * math.sin(h2), cy - sign * seg.arc.radius * math.cos(h2)
-            h = h2
-        elif seg.points:
-            px, py = seg.points[-1]
-            prev = seg.points[-2] if len(seg.points) > 1 else (x, y)
-            if (px, py) != tuple(prev):
-                h = math.atan2(py - prev[1], px - prev[0])
-            x, y = px, py
-    return total
