@@ -2,6 +2,7 @@
 
     python benchmarks/fuzz.py                          # every target, 500 inputs each
     python benchmarks/fuzz.py --target rules --inputs 100000 --seed 3 --keep fuzz-failures
+    python benchmarks/fuzz.py --target world --inputs 20000 --run-every 20
 
 One function per target returns a :class:`Tally`; the table prints, per target: inputs, inputs
 answered with diagnostics (refused), accepted, internal errors, NaN states, inconsistent results
@@ -17,6 +18,10 @@ Targets:
   monitor over a short trace for what ``check`` accepts.
 - ``traces``: trace CSVs (:mod:`twolevel.fuzz.traces`): ``monitor`` on a drive written plainly,
   in ``--variants`` other formats (which must give the same verdicts) and once mangled.
+- ``world``: maps and scenarios (:mod:`twolevel.fuzz.world`): the shipped scenarios and
+  tests/world/fuzz_seeds/ mutated field-wise; ``check`` on each, and for what it accepts loading
+  and the built world, and (every ``--run-every``-th) ``plan`` and ``simulate --duration 2`` with
+  no NaN in any vehicle's state ("ran" counts those).
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ import argparse
 import random
 import signal
 import sys
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -62,6 +68,7 @@ def _campaign(name: str, inputs: int, seed: int, timeout: float, keep: Path | No
               one: Callable[[random.Random], tuple[object, str, str]]) -> Tally:
     """Run ``one`` (input → outcome verdict, detail, the input as text) on ``inputs`` draws."""
     from twolevel.fuzz.rules import ACCEPTED, INCONSISTENT, INTERNAL, NAN_STATE, REFUSED
+    from twolevel.fuzz.world import NAN_STATE as WORLD_NAN_STATE
 
     tally = Tally()
     start = time.perf_counter()
@@ -82,7 +89,7 @@ def _campaign(name: str, inputs: int, seed: int, timeout: float, keep: Path | No
         tally.refused += verdict == REFUSED
         tally.accepted += verdict == ACCEPTED
         tally.internal += verdict == INTERNAL
-        tally.nan_state += verdict == NAN_STATE
+        tally.nan_state += verdict in (NAN_STATE, WORLD_NAN_STATE)
         tally.inconsistent += verdict == INCONSISTENT
         hang = verdict == "hang" or took > HANG_S
         tally.hangs += hang
@@ -124,7 +131,34 @@ def fuzz_traces(inputs: int, seed: int, *, timeout: float = 120.0, keep: Path | 
     return _campaign("traces", inputs, seed, timeout, keep, one)
 
 
-TARGETS: dict[str, Callable[..., Tally]] = {"rules": fuzz_rules, "traces": fuzz_traces}
+def fuzz_world(inputs: int, seed: int, *, timeout: float = 120.0, keep: Path | None = None,
+               run_every: int = 1) -> Tally:
+    """Maps and scenarios: ``inputs`` mutated seeds, each checked; what check accepts is loaded
+    and built, and every ``run_every``-th of those planned and simulated for 2 s."""
+    from twolevel.fuzz.mutation import dump
+    from twolevel.fuzz.world import ACCEPTED, generate, load_seed, probe, shipped_seeds, write_case
+
+    seeds = shipped_seeds(REPO) + [load_seed(REPO / "tests/world/fuzz_seeds/scenario.yaml")]
+    accepted = [0]
+
+    def one(rnd: random.Random) -> tuple[str, str, str]:
+        case = generate(rnd.choice(seeds), rnd)
+        text = f"# {case}\n# scenarios/s.yaml\n{dump(case.scenario)}# maps/m.yaml\n{dump(case.map)}"
+        with tempfile.TemporaryDirectory() as d:
+            scenario = write_case(case, d)
+            out = probe(scenario, run=False)
+            if out.verdict == ACCEPTED:
+                accepted[0] += 1
+                if accepted[0] % run_every == 0:
+                    out = probe(scenario, run=True, solver=rnd.choice(["modes", "highs"]))
+        return out.verdict, out.detail, text
+
+    tally = _campaign("world", inputs, seed, timeout, keep, one)
+    tally.ran = accepted[0] // run_every
+    return tally
+
+
+TARGETS: dict[str, Callable[..., Tally]] = {"rules": fuzz_rules, "traces": fuzz_traces, "world": fuzz_world}
 
 
 def main() -> None:
@@ -133,6 +167,8 @@ def main() -> None:
     ap.add_argument("--inputs", type=int, default=500, help="inputs per target")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--variants", type=int, default=3, metavar="N", help="traces: other formats per drive")
+    ap.add_argument("--run-every", type=int, default=1, metavar="N",
+                    help="world: plan and simulate every N-th accepted input (1: all)")
     ap.add_argument("--timeout", type=float, default=120.0, metavar="SECONDS", help="stop an input after this long")
     ap.add_argument("--keep", type=Path, metavar="DIR", help="write every broken input into DIR")
     args = ap.parse_args()
@@ -140,7 +176,7 @@ def main() -> None:
         args.keep.mkdir(parents=True, exist_ok=True)
     rows = []
     for name in args.target or sorted(TARGETS):
-        kwargs = {"variants": args.variants} if name == "traces" else {}
+        kwargs = {"traces": {"variants": args.variants}, "world": {"run_every": args.run_every}}.get(name, {})
         t = TARGETS[name](args.inputs, args.seed, timeout=args.timeout, keep=args.keep, **kwargs)
         rows.append((name, t))
     head = ("target", "inputs", "refused", "accepted", "ran", "internal", "nan-state", "inconsistent",

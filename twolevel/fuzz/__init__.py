@@ -10,4 +10,8 @@ share one definition of "held up". Inputs are drawn from a :class:`random.Random
   printing back), then monitoring what it accepts.
 - :mod:`twolevel.fuzz.traces`: trace CSVs: reformatting one never changes a verdict; mangled
   bytes give diagnostics.
+- :mod:`twolevel.fuzz.mutation`: field-wise mutation of YAML documents (plain data) and writing
+  them back as YAML, duplicate keys included.
+- :mod:`twolevel.fuzz.world`: maps and scenarios: ``check``, then (for what it accepts) loading,
+  building the world, ``plan`` and ``simulate``.
 """
