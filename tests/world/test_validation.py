@@ -254,3 +254,39 @@ def test_every_vehicle_parameter_is_checked_against_a_finite_range() -> None:
                         params.with_overrides({name: good})
                 else:
                     assert getattr(params.with_overrides({name: good}), name) == good
+
+
+# ------------------------------------------------------------------------------ populations
+
+
+def test_a_population_of_tiny_boxes_is_refused_at_the_box(tmp_path: Path) -> None:
+    """Boxes 1e-300 m long with no gap made build_world enumerate 1e303 places (ValueError:
+    Maximum allowed size exceeded); 1e-6 m asked numpy for 4 GB."""
+    pop = "populations:\n  - {id: crowd, count: 5, lanes: [r], min_gap: 0, box: {length: 1.0e-300, width: 1.8}}"
+    scn, diags = load_scenario(_scenario(tmp_path, "rules: []", f"rules: []\n{pop}"))
+    assert scn is None and _errors(diags) == [("YML414", "scn.yaml", 13, 65)], diags
+
+
+def test_a_population_with_too_many_places_is_refused(tmp_path: Path) -> None:
+    long_map = MAP.replace("      - line: 50\n", "      - line: 50\n" + "      - line: 100000\n" * 4)
+    pop = "populations:\n  - {id: crowd, count: 5, lanes: [next], min_gap: 0, box: {length: 0.3}}"
+    scn, diags = load_scenario(_scenario(tmp_path, "rules: []", f"rules: []\n{pop}", map_text=long_map))
+    assert scn is None and _errors(diags) == [("YML420", "scn.yaml", 13, 51)], diags
+    assert "places to choose from" in diags[0].message and "s_range" in (diags[0].hint or "")
+    ok = pop.replace("min_gap: 0,", "min_gap: 0, s_range: [0, 1000],")
+    scn, diags = load_scenario(_scenario(tmp_path, "rules: []", f"rules: []\n{ok}", map_text=long_map))
+    assert scn is not None and _errors(diags) == []
+
+
+def test_a_lane_listed_twice_in_a_population_is_refused(tmp_path: Path) -> None:
+    pop = "populations:\n  - {id: crowd, count: 5, lanes: [next, next]}"
+    scn, diags = load_scenario(_scenario(tmp_path, "rules: []", f"rules: []\n{pop}"))
+    assert scn is None and _errors(diags) == [("YML417", "scn.yaml", 13, 41)], diags
+
+
+@pytest.mark.parametrize("setting, column", [("H: 101", 17), ("r_near: 201", 22), ("samples: 10001", 23)])
+def test_controller_settings_that_make_a_step_take_seconds_are_refused(tmp_path: Path, setting: str, column: int) -> None:
+    """H = 200 with r_near = 500 m on the safety scenario took 15 s for 2 s of simulated time,
+    100,000 samples 28 s: the ranges now end where a step still takes a fraction of a second."""
+    scn, diags = load_scenario(_scenario(tmp_path, "rules: []", f"rules: []\ncontroller: {{{setting}}}"))
+    assert scn is None and _errors(diags) == [("YML414", "scn.yaml", 12, column)], diags

@@ -428,23 +428,7 @@ def _check_scenario(spec: ScenarioFile, doc: Document, m: MapFile) -> list[Diagn
             out += _check_lane_pos(p.start.lane, p.start.s, ("participants", i, "start"), doc, lengths)
     for i, pop in enumerate(spec.populations):
         ids.append((pop.id, ("populations", i, "id")))
-        if all(lane in lengths for lane in pop.lanes):
-            pitch = pop.box.length + pop.min_gap
-            room = 0
-            for lane in pop.lanes:
-                lo, hi = pop.s_range or (0.0, lengths[lane])
-                span = min(hi, lengths[lane]) - lo - pop.box.length
-                room += int(span // pitch) + 1 if span >= 0 else 0
-                if lane == spec.ego.start.lane:
-                    room -= 2
-            if pop.count > room:
-                out.append(YML421(f"room for about {max(room, 0)} vehicles of {pop.count} on these lanes; the rest are left out",
-                                  doc.locate(("populations", i, "count"), value=True),
-                                  hint="lower 'min_gap', widen 's_range' or add lanes"))
-        for k, lane in enumerate(pop.lanes):
-            if lane not in lengths:
-                out.append(YML416(f"no lane '{lane}' in the map", doc.locate(("populations", i, "lanes", k), value=True),
-                                  hint=_suggest(lane, lengths)))
+        out += _check_population(i, spec, doc, lengths)
     out += _check_ids(ids[1:], doc, "participant")
     out += _check_vehicle(spec, doc)
     out += _check_assumptions(spec, doc, [i for i, _ in ids[1:]])
@@ -476,6 +460,46 @@ def _check_assumptions(spec: ScenarioFile, doc: Document, known: list[str]) -> l
                               doc.locate(("assumptions", kind, name), value=True),
                               hint="others may do more than assumed here; the safety guarantee covers only what "
                                    "is assumed (defaults and sources: twolevel/world/assumptions.py)"))
+    return out
+
+
+MAX_SLOTS = 1_000_000
+"""Most places a population may choose from (one every box length + ``min_gap`` along its lanes)."""
+
+
+def _check_population(i: int, spec: ScenarioFile, doc: Document, lengths: dict[str, float]) -> list[Diagnostic]:
+    """A population's lanes exist, each once; there are places for its vehicles (a warning when
+    too few), and not so many that enumerating them runs out of memory."""
+    pop = spec.populations[i]
+    at = ("populations", i)
+    out: list[Diagnostic] = []
+    seen: set[str] = set()
+    for k, lane in enumerate(pop.lanes):
+        if lane not in lengths:
+            out.append(YML416(f"no lane '{lane}' in the map", doc.locate(at + ("lanes", k), value=True),
+                              hint=_suggest(lane, lengths)))
+        elif lane in seen:
+            out.append(YML417(f"lane '{lane}' is listed twice: its vehicles would be placed on top of each other",
+                              doc.locate(at + ("lanes", k), value=True), hint="list each lane once"))
+        seen.add(lane)
+    if out:
+        return out
+    pitch = pop.box.length + pop.min_gap
+    room = 0
+    for lane in pop.lanes:
+        lo, hi = pop.s_range or (0.0, lengths[lane])
+        span = min(hi, lengths[lane]) - lo - pop.box.length
+        room += int(span // pitch) + 1 if span >= 0 else 0
+        if lane == spec.ego.start.lane:
+            room -= 2
+    if room > MAX_SLOTS:
+        where = at + ("min_gap",) if at + ("min_gap",) in doc.where else at
+        out.append(YML420(f"one place every {pitch:g} m along these lanes gives {room:,} places to choose from; "
+                          f"at most {MAX_SLOTS:,} are allowed", doc.locate(where, value=True),
+                          hint="place the population on part of its lanes with 's_range', or raise 'min_gap'"))
+    elif pop.count > room:
+        out.append(YML421(f"room for about {max(room, 0)} vehicles of {pop.count} on these lanes; the rest are left out",
+                          doc.locate(at + ("count",), value=True), hint="lower 'min_gap', widen 's_range' or add lanes"))
     return out
 
 

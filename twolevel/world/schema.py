@@ -247,8 +247,8 @@ class Placement(_Model):
 class Box(_Model):
     """A vehicle's bounding box, centred on its reference point."""
 
-    length: Number = Field(default=4.22, gt=0, le=30, description="length [m]")
-    width: Number = Field(default=1.8, gt=0, le=5, description="width [m]")
+    length: Number = Field(default=4.22, ge=0.3, le=30, description="length [m]")
+    width: Number = Field(default=1.8, ge=0.3, le=5, description="width [m]")
 
 
 class Ego(_Model):
@@ -361,12 +361,12 @@ class RuleRef(_Model):
 class ControllerSettings(_Model):
     """The two-level controller's settings; defaults are the paper's."""
 
-    H: Count = Field(default=10, ge=1, le=200, description="MPC horizon [steps]")
+    H: Count = Field(default=10, ge=1, le=100, description="MPC horizon [steps]")
     dt: Number = Field(default=0.1, gt=0, le=1, description="control period [s]")
-    r_near: Number = Field(default=10.0, gt=0, le=500, description="sensing radius for nearby vehicles, signs, lights [m]")
+    r_near: Number = Field(default=10.0, gt=0, le=200, description="sensing radius for nearby vehicles, signs, lights [m]")
     r: Number = Field(default=0.3, gt=0, le=10, description="radius of the ball sampled around u* by the low level [-]")
     D_safe: Number = Field(default=1.0, ge=0, le=50, description="collision_free distance at the high level [m]")
-    samples: Count = Field(default=200, ge=0, le=100000, description="low-level sampling budget [controls]")
+    samples: Count = Field(default=200, ge=0, le=10_000, description="low-level sampling budget [controls]")
     time_limit: Number = Field(default=0.1, gt=0, le=60, description="solver time limit per step [s]")
     solver: Literal["modes", "highs"] = Field(default="modes", description="'modes' (mode search, Clarabel) or 'highs' (MILP)")
     stop_speed: Number = Field(default=0.1, gt=0, le=5, description="speed counted as standing still [m/s]")
