@@ -284,9 +284,19 @@ def test_a_lane_listed_twice_in_a_population_is_refused(tmp_path: Path) -> None:
     assert scn is None and _errors(diags) == [("YML417", "scn.yaml", 13, 41)], diags
 
 
-@pytest.mark.parametrize("setting, column", [("H: 101", 17), ("r_near: 201", 22), ("samples: 10001", 23)])
-def test_controller_settings_that_make_a_step_take_seconds_are_refused(tmp_path: Path, setting: str, column: int) -> None:
+@pytest.mark.parametrize("setting, column",
+                         [("H: 101", 17), ("r_near: 201", 22), ("samples: 10001", 23), ("dt: 0.001", 18)])
+def test_controller_settings_that_make_a_run_take_long_are_refused(tmp_path: Path, setting: str, column: int) -> None:
     """H = 200 with r_near = 500 m on the safety scenario took 15 s for 2 s of simulated time,
-    100,000 samples 28 s: the ranges now end where a step still takes a fraction of a second."""
+    100,000 samples 28 s, and dt = 1e-6 s made `simulate --duration 2` two million steps: the
+    ranges now end where a step still takes a fraction of a second."""
     scn, diags = load_scenario(_scenario(tmp_path, "rules: []", f"rules: []\ncontroller: {{{setting}}}"))
     assert scn is None and _errors(diags) == [("YML414", "scn.yaml", 12, column)], diags
+
+
+def test_a_run_shorter_than_one_control_period_is_refused(tmp_path: Path) -> None:
+    """`run: {duration: 1e-300}` simulated no step at all and called the run complete."""
+    scn, diags = load_scenario(_scenario(tmp_path, "rules: []", "rules: []\nrun: {duration: 0.05}"))
+    assert scn is None and _errors(diags) == [("YML414", "scn.yaml", 12, 17)], diags
+    scn, diags = load_scenario(_scenario(tmp_path, "rules: []", "rules: []\nrun: {duration: 0.1}"))
+    assert scn is not None

@@ -431,6 +431,10 @@ def _check_scenario(spec: ScenarioFile, doc: Document, m: MapFile) -> list[Diagn
         out += _check_population(i, spec, doc, lengths)
     out += _check_ids(ids[1:], doc, "participant")
     out += _check_vehicle(spec, doc)
+    if spec.run.duration < spec.controller.dt:
+        out.append(YML414(f"the run lasts {spec.run.duration:g} s, less than one control period (dt = "
+                          f"{spec.controller.dt:g} s): it would take no step", doc.locate(("run", "duration"), value=True),
+                          hint="a run lasts at least dt"))
     out += _check_assumptions(spec, doc, [i for i, _ in ids[1:]])
     return out
 

@@ -362,7 +362,7 @@ class ControllerSettings(_Model):
     """The two-level controller's settings; defaults are the paper's."""
 
     H: Count = Field(default=10, ge=1, le=100, description="MPC horizon [steps]")
-    dt: Number = Field(default=0.1, gt=0, le=1, description="control period [s]")
+    dt: Number = Field(default=0.1, ge=0.01, le=1, description="control period [s]")
     r_near: Number = Field(default=10.0, gt=0, le=200, description="sensing radius for nearby vehicles, signs, lights [m]")
     r: Number = Field(default=0.3, gt=0, le=10, description="radius of the ball sampled around u* by the low level [-]")
     D_safe: Number = Field(default=1.0, ge=0, le=50, description="collision_free distance at the high level [m]")
