@@ -42,7 +42,7 @@ def test_seeds_are_valid_and_use_every_kind_of_field() -> None:
             assert outcome.verdict == "accepted" and outcome.codes == (), (seed.name, outcome)
     text = dump(RICH.scenario) + dump(RICH.map)
     for key in ("points", "waypoints", "via", "s_range", "speed_range", "vehicle", "idm", "cycle", "script",
-                "successors", "lateral", "heading", "constants"):
+                "successors", "lateral", "heading", "constants", "assumptions", "road_users"):
         assert f"{key}:" in text, key
 
 
