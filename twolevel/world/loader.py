@@ -555,7 +555,7 @@ def _check_rule_names(rules: Iterable[RuleFile]) -> list[Diagnostic]:
     column ``rob_<name>``, a monitor verdict and a constraint group of the MPC)."""
     out: list[Diagnostic] = []
     listed: dict[str, RuleFile] = {}
-    defined: dict[str, Span] = {}
+    defined: dict[str, Span] = {}  # rule name → where the first file defines it
     for rf in rules:
         if not _is_file(rf.path):
             continue  # reported as a missing file
@@ -565,13 +565,16 @@ def _check_rule_names(rules: Iterable[RuleFile]) -> list[Diagnostic]:
                               hint="list each rule file once; to check a rule at other constants, copy it under another name"))
             continue
         listed[rf.path] = rf
-        for name, span in _rule_names(rf.path):
-            first_def = defined.setdefault(name, span)
-            if first_def is not span:
+        names = _rule_names(rf.path)
+        for name, span in names:  # a name repeated within one file is the rule checker's (STL2xx)
+            first_def = defined.get(name)
+            if first_def is not None:
                 out.append(YML428(
                     f"rule '{name}' is defined twice: at {first_def.file}:{first_def.line} and at {span.file}:{span.line}",
                     rf.span, hint="rule names are unique across a scenario's rule files: rename one of the rules, "
                                   "or leave out the file that repeats it"))
+        for name, span in names:
+            defined.setdefault(name, span)
     return out
 
 
