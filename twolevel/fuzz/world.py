@@ -178,16 +178,6 @@ def _finite_world(world: Any) -> str:
     return ", ".join(bad)
 
 
-def _run_cli(args: list[str]) -> tuple[int, str, BaseException | None]:
-    from typer.testing import CliRunner
-
-    from twolevel.cli import app
-
-    res = CliRunner().invoke(app, args)
-    exc = res.exception if not isinstance(res.exception, SystemExit) else None
-    return res.exit_code, res.stderr, exc
-
-
 def _nan_rows(trace: Path) -> str:
     """The first row of ``trace`` whose ego state is not finite ("" if none)."""
     with trace.open(newline="", encoding="utf-8") as f:
@@ -204,8 +194,8 @@ def _nan_rows(trace: Path) -> str:
 
 def probe(scenario: str | Path, *, run: bool = False, solver: str = "modes") -> Outcome:
     """Check ``scenario``; if check reports no error, load it and build its world, and with
-    ``run`` also ``plan`` it (with ``solver``) and ``simulate --duration 2`` it (through the CLI,
-    into ``<folder>/run``)."""
+    ``run`` also ``plan`` it (with ``solver``) and ``simulate --duration 2`` it (into
+    ``<folder>/run``)."""
     from twolevel.pipeline import check
 
     seconds: dict[str, float] = {}
@@ -243,28 +233,44 @@ def probe(scenario: str | Path, *, run: bool = False, solver: str = "modes") -> 
     return _run(Path(scenario), solver, codes, seconds)
 
 
+def _errors(diags: Iterable[Any]) -> str:
+    return "; ".join(f"{d.code} {d.message}" for d in diags if d.is_error)[:300]
+
+
 def _run(scenario: Path, solver: str, codes: tuple[str, ...], seconds: dict[str, float]) -> Outcome:
+    """``twolevel plan`` and ``twolevel simulate --duration 2`` as the CLI runs them (the same
+    library functions; the CLI adds only rendering and exit codes)."""
+    from twolevel.pipeline.planning import plan_scenario
+    from twolevel.sim.engine import simulate_scenario
+
     t2 = time.perf_counter()
-    code, err, exc = _run_cli(["plan", str(scenario), "--solver", solver, "--format", "json", "--time-limit", "5"])
+    try:
+        report, diags = plan_scenario(str(scenario), solver=solver, time_limit=5.0)
+    except Exception as exc:
+        return Outcome(INTERNAL, f"plan raised {type(exc).__name__}: {exc}", codes, seconds)
     seconds["plan"] = time.perf_counter() - t2
-    if exc is not None or "internal error" in err:
-        return Outcome(INTERNAL, f"plan: {type(exc).__name__ if exc else ''} {exc or err.strip()[-300:]}", codes, seconds)
-    if code == 2:
-        return Outcome(INCONSISTENT, f"plan refused what check accepted: {err.strip()[-300:]}", codes, seconds)
+    if report is None or any(d.is_error and (d.code.startswith("MIL50") or d.code == "MIL514") for d in diags):
+        return Outcome(INCONSISTENT, f"plan refused what check accepted: {_errors(diags)}", codes, seconds)
+    if report.status in ("optimal", "feasible") and not all(math.isfinite(v) for row in report.plan for v in row):
+        return Outcome(NAN_STATE, f"plan ({report.status}) has a non-finite value", codes, seconds)
     run_dir = scenario.parent.parent / "run"
     shutil.rmtree(run_dir, ignore_errors=True)
     t3 = time.perf_counter()
-    code, err, exc = _run_cli(["simulate", str(scenario), "--out", str(run_dir), "--duration", "2", "--no-progress"])
+    try:
+        summary, diags = simulate_scenario(str(scenario), str(run_dir), duration=2.0)
+    except Exception as exc:
+        return Outcome(INTERNAL, f"simulate raised {type(exc).__name__}: {exc}", codes, seconds)
     seconds["simulate"] = time.perf_counter() - t3
-    if exc is not None or "internal error" in err or "SIM613" in err:
-        return Outcome(INTERNAL, f"simulate: {type(exc).__name__ if exc else ''} {exc or err.strip()[-300:]}", codes, seconds)
+    if summary is None:
+        return Outcome(INCONSISTENT, f"simulate refused what check accepted: {_errors(diags)}", codes, seconds)
+    if summary.status != "complete":
+        return Outcome(INTERNAL, f"simulate ended '{summary.status}': {_errors(diags)}", codes, seconds)
     try:
         meta = json.loads((run_dir / "run.json").read_text(encoding="utf-8"))
     except (OSError, ValueError) as e:
-        return Outcome(INCONSISTENT, f"simulate (exit {code}) left no readable run.json: {e}; {err.strip()[-300:]}",
-                       codes, seconds)
+        return Outcome(INTERNAL, f"simulate left no readable run.json: {e}", codes, seconds)
     if meta.get("status") != "complete":
-        return Outcome(INTERNAL, f"simulate ended '{meta.get('status')}': {err.strip()[-300:]}", codes, seconds)
+        return Outcome(INTERNAL, f"run.json says '{meta.get('status')}' after a complete run", codes, seconds)
     nan = _nan_rows(run_dir / "trace.csv")
     if nan:
         return Outcome(NAN_STATE, f"simulate wrote a non-finite ego state, {nan}", codes, seconds)
