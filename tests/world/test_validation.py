@@ -177,7 +177,7 @@ def test_empty_via_is_a_diagnostic_in_check_plan_and_simulate(tmp_path: Path) ->
     assert _errors(check_world_file(p)) == [("YML414", "scn.yaml", 9, 8)]
     for args in (["plan", str(p)], ["simulate", str(p), "--out", str(tmp_path / "run"), "--no-progress"]):
         res = runner.invoke(app, args)
-        assert res.exit_code == 2 and res.exception is None or isinstance(res.exception, SystemExit), res.output
+        assert res.exit_code == 2 and isinstance(res.exception, (SystemExit, type(None))), res.output
         assert "YML414" in res.stderr and "internal error" not in res.stderr
 
 
@@ -192,6 +192,17 @@ def test_unusable_paths_are_diagnostics(tmp_path: Path) -> None:
     assert _errors(check_world_file(p)) == [("YML418", "scn.yaml", 11, 9)]
     p = _scenario(tmp_path, "map: map.yaml", 'map: "m\\0.yaml"\nextends: "e\\0.yaml"')
     assert [c for c, *_ in _errors(check_world_file(p))] == ["YML415", "YML415"]
+
+
+@pytest.mark.parametrize("entry", ["map: loop.yaml", "map: map.yaml\nextends: loop.yaml", "rules: [loop.yaml]"])
+def test_a_loop_of_symbolic_links_is_a_diagnostic(tmp_path: Path, entry: str) -> None:
+    """Path.resolve() raised RuntimeError on a loop of links: an internal error in check."""
+    (tmp_path / "loop.yaml").symlink_to("other.yaml")
+    (tmp_path / "other.yaml").symlink_to("loop.yaml")
+    old = "rules: []" if entry.startswith("rules") else "map: map.yaml"
+    res = runner.invoke(app, ["check", str(_scenario(tmp_path, old, entry)), "--output-format", "concise"])
+    assert res.exit_code == 1 and isinstance(res.exception, (SystemExit, type(None))), res.output
+    assert "YML418" in res.output and "internal error" not in res.output
 
 
 # -------------------------------------------------------------------------------- rule names

@@ -196,7 +196,16 @@ def validation_diagnostics(exc: ValidationError, doc: Document, root: type[BaseM
 
 def _resolve(relative: str, span: Span) -> Path:
     """``relative`` as written in the file of ``span``, resolved against that file's folder."""
-    return (Path(span.file).parent / relative).resolve()
+    return _resolved(Path(span.file).parent / relative)
+
+
+def _resolved(path: Path) -> Path:
+    """``path`` made absolute with its symbolic links resolved, or only made absolute when they
+    cannot be (a loop of links: reading it then reports why)."""
+    try:
+        return path.resolve()
+    except (OSError, RuntimeError):  # RuntimeError: a symlink loop (Python < 3.13)
+        return Path(os.path.abspath(path))
 
 
 def _read_kind(path: Path, expected: Kind, referrer: Span | None,
@@ -222,10 +231,11 @@ def _read_kind(path: Path, expected: Kind, referrer: Span | None,
         return doc, []  # the schema reports it
     at = doc.locate(("extends",), value=True)
     target = _resolve(base, at)
-    if target in stack or target == path.resolve():
-        chain = " → ".join(p.name for p in (*stack, path.resolve(), target))
+    here = _resolved(path)
+    if target in stack or target == here:
+        chain = " → ".join(p.name for p in (*stack, here, target))
         return None, [YML419(f"'extends' forms a cycle: {chain}", at, hint="a scenario cannot extend itself")]
-    parent, pdiags = _read_kind(target, "scenario", at, stack + (path.resolve(),))
+    parent, pdiags = _read_kind(target, "scenario", at, stack + (here,))
     if parent is None:
         return None, pdiags
     return _merge(parent, doc), pdiags
