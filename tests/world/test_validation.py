@@ -311,3 +311,13 @@ def test_a_run_shorter_than_one_control_period_is_refused(tmp_path: Path) -> Non
     assert scn is None and _errors(diags) == [("YML414", "scn.yaml", 12, 17)], diags
     scn, diags = load_scenario(_scenario(tmp_path, "rules: []", "rules: []\nrun: {duration: 0.1}"))
     assert scn is not None
+
+
+@pytest.mark.parametrize("idm, column", [("v0: 1.0e-300", 69), ("a: 0.001", 68), ("b: 0.001", 68)])
+def test_idm_parameters_that_overflow_its_acceleration_are_refused(tmp_path: Path, idm: str, column: int) -> None:
+    """v0 = 1e-300 overflowed (v/v0)^delta, a·b = 1e-600 divided by zero in the desired gap:
+    the IDM's acceleration became -inf (numpy warned; the vehicles stood still)."""
+    p = _scenario(tmp_path, "  - {id: parked, behaviour: stationary, start: {lane: r, s: 60}}",
+                  f"  - {{id: parked, behaviour: idm, start: {{lane: r, s: 60}}, idm: {{{idm}}}}}")
+    scn, diags = load_scenario(p)
+    assert scn is None and _errors(diags) == [("YML414", "scn.yaml", 10, column)], diags

@@ -192,6 +192,19 @@ def _nan_rows(trace: Path) -> str:
     return ""
 
 
+def _nan_frames(frames: Path) -> str:
+    """The first frame in which a vehicle's pose is not finite ("" if none, or no frames)."""
+    if not frames.exists():
+        return ""
+    with frames.open(encoding="utf-8") as f:
+        for k, line in enumerate(f):
+            frame = json.loads(line)
+            for who, rows in (("ego", [frame.get("ego", [])]), ("others", frame.get("others", []))):
+                if not all(isinstance(v, (int, float)) and math.isfinite(v) for row in rows for v in row):
+                    return f"frame {k + 1} (t = {frame.get('t')}): {who} not finite"
+    return ""
+
+
 def probe(scenario: str | Path, *, run: bool = False, solver: str = "modes") -> Outcome:
     """Check ``scenario``; if check reports no error, load it and build its world, and with
     ``run`` also ``plan`` it (with ``solver``) and ``simulate --duration 2`` it (into
@@ -271,9 +284,9 @@ def _run(scenario: Path, solver: str, codes: tuple[str, ...], seconds: dict[str,
         return Outcome(INTERNAL, f"simulate left no readable run.json: {e}", codes, seconds)
     if meta.get("status") != "complete":
         return Outcome(INTERNAL, f"run.json says '{meta.get('status')}' after a complete run", codes, seconds)
-    nan = _nan_rows(run_dir / "trace.csv")
+    nan = _nan_rows(run_dir / "trace.csv") or _nan_frames(run_dir / "frames.jsonl")
     if nan:
-        return Outcome(NAN_STATE, f"simulate wrote a non-finite ego state, {nan}", codes, seconds)
+        return Outcome(NAN_STATE, f"simulate wrote a non-finite state, {nan}", codes, seconds)
     return Outcome(ACCEPTED, "", codes, seconds)
 
 

@@ -276,11 +276,11 @@ class RouteSpec(_Model):
 class IDMParams(_Model):
     """Intelligent Driver Model parameters (Treiber, Hennecke, Helbing 2000)."""
 
-    v0: Number | None = Field(default=None, gt=0, le=100, description="desired speed [m/s]; default min(120 km/h, lane limit)")
+    v0: Number | None = Field(default=None, ge=0.1, le=100, description="desired speed [m/s]; default min(120 km/h, lane limit)")
     T: Number = Field(default=1.6, gt=0, le=10, description="time headway [s]")
     s0: Number = Field(default=2.0, ge=0, le=50, description="jam distance [m]")
-    a: Number = Field(default=0.73, gt=0, le=10, description="maximum acceleration [m/s²]")
-    b: Number = Field(default=1.67, gt=0, le=10, description="comfortable deceleration [m/s²]")
+    a: Number = Field(default=0.73, ge=0.1, le=10, description="maximum acceleration [m/s²]")
+    b: Number = Field(default=1.67, ge=0.1, le=10, description="comfortable deceleration [m/s²]")
     delta: Number = Field(default=4.0, gt=0, le=10, description="acceleration exponent [-]")
 
 
