@@ -3,7 +3,7 @@
 The invariant: whatever ``twolevel check`` says about an input, it says it with diagnostics
 (never an exception); whatever it accepts loads, builds a world with finite numbers, and goes
 through ``twolevel plan`` and ``twolevel simulate --duration 2`` without an internal error and
-without a NaN in the ego's state.
+without a NaN in any vehicle's state.
 
 A :class:`Seed` is a scenario with its map (as plain data) and the rule files it names; a
 :class:`Case` is a seed after some mutations, written into a folder as ``scenarios/s.yaml``,
@@ -18,19 +18,19 @@ import json
 import math
 import random
 import shutil
-import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable
 
 from twolevel.fuzz.mutation import Mutation, Pairs, Path_, apply, dump, mutate
+from twolevel.fuzz.rules import ACCEPTED, INCONSISTENT, INTERNAL, REFUSED, Outcome
 
-__all__ = ["Seed", "Case", "Outcome", "load_seed", "shipped_seeds", "generate", "write_case", "probe"]
+__all__ = ["Seed", "Case", "load_seed", "shipped_seeds", "generate", "write_case", "probe", "NAN_STATE"]
 
-#: Verdicts of :func:`probe`. "refused": check reported an error; "accepted": it did not and every
-#: later stage ran; the rest break the invariant.
-REFUSED, ACCEPTED = "refused", "accepted"
-INTERNAL, INCONSISTENT, NAN_STATE = "internal-error", "check-accepted-but-stage-refused", "nan-state"
+#: The verdict of a run that wrote a non-finite vehicle state (the others are the rule target's:
+#: "refused" and "accepted" keep the invariant; "internal-error" and "inconsistent", here a
+#: later stage refusing what ``check`` accepted, break it).
+NAN_STATE = "nan-state"
 
 
 @dataclass(frozen=True)
@@ -56,22 +56,6 @@ class Case:
 
     def __str__(self) -> str:
         return f"{self.seed}: " + "; ".join(f"{t} {m}" for t, m in self.mutations)
-
-
-@dataclass
-class Outcome:
-    """What happened to one case: ``verdict`` and, stage by stage, what was seen and how long it
-    took [s]. ``detail`` says what broke (an exception, a diagnostic, a NaN row)."""
-
-    verdict: str
-    detail: str = ""
-    codes: tuple[str, ...] = ()
-    seconds: dict[str, float] = field(default_factory=dict)
-
-    @property
-    def broken(self) -> bool:
-        """The invariant does not hold for this case."""
-        return self.verdict not in (REFUSED, ACCEPTED)
 
 
 def load_seed(scenario_path: str | Path) -> Seed:
@@ -211,92 +195,71 @@ def probe(scenario: str | Path, *, run: bool = False, solver: str = "modes") -> 
     ``<folder>/run``)."""
     from twolevel.pipeline import check
 
-    seconds: dict[str, float] = {}
-    t0 = time.perf_counter()
     try:
         result = check([str(scenario)])
     except Exception as exc:  # the invariant: never
-        return Outcome(INTERNAL, f"check raised {type(exc).__name__}: {exc}", seconds={"check": time.perf_counter() - t0})
-    seconds["check"] = time.perf_counter() - t0
+        return Outcome(INTERNAL, f"check raised {type(exc).__name__}: {exc}")
     codes = tuple(sorted({d.code for d in result.diagnostics}))
     bad = [d for d in result.diagnostics if d.span.line < 1 or d.span.column < 1 or not d.code[:3] in ("YML", "STL", "CLI")]
     if bad:
-        return Outcome(INTERNAL, f"diagnostic without a position or a stage code: {bad[0]}", codes, seconds)
+        return Outcome(INTERNAL, f"diagnostic without a position or a stage code: {bad[0]}", codes)
     if any(d.is_error for d in result.diagnostics):
-        return Outcome(REFUSED, "", codes, seconds)
+        return Outcome(REFUSED, "", codes)
     stage = "load"
     try:
         from twolevel.world.loader import load_scenario
         from twolevel.world.world import build_world
 
-        t1 = time.perf_counter()
         scn, diags = load_scenario(scenario)
         if scn is None:
-            return Outcome(INCONSISTENT, f"load refused what check accepted: {diags[:1]}", codes, seconds)
+            return Outcome(INCONSISTENT, f"load refused what check accepted: {diags[:1]}", codes)
         stage = "build"
         world = build_world(scn)
-        seconds["build"] = time.perf_counter() - t1
         bad_numbers = _finite_world(world)
         if bad_numbers:
-            return Outcome(NAN_STATE, f"the built world has non-finite {bad_numbers}", codes, seconds)
+            return Outcome(NAN_STATE, f"the built world has non-finite {bad_numbers}", codes)
     except Exception as exc:
-        return Outcome(INTERNAL, f"{stage} raised {type(exc).__name__}: {exc}", codes, seconds)
+        return Outcome(INTERNAL, f"{stage} raised {type(exc).__name__}: {exc}", codes)
     if not run:
-        return Outcome(ACCEPTED, "", codes, seconds)
-    return _run(Path(scenario), solver, codes, seconds)
+        return Outcome(ACCEPTED, "", codes)
+    return _run(Path(scenario), solver, codes)
 
 
 def _errors(diags: Iterable[Any]) -> str:
     return "; ".join(f"{d.code} {d.message}" for d in diags if d.is_error)[:300]
 
 
-def _run(scenario: Path, solver: str, codes: tuple[str, ...], seconds: dict[str, float]) -> Outcome:
+def _run(scenario: Path, solver: str, codes: tuple[str, ...]) -> Outcome:
     """``twolevel plan`` and ``twolevel simulate --duration 2`` as the CLI runs them (the same
     library functions; the CLI adds only rendering and exit codes)."""
     from twolevel.pipeline.planning import plan_scenario
     from twolevel.sim.engine import simulate_scenario
 
-    t2 = time.perf_counter()
     try:
         report, diags = plan_scenario(str(scenario), solver=solver, time_limit=5.0)
     except Exception as exc:
-        return Outcome(INTERNAL, f"plan raised {type(exc).__name__}: {exc}", codes, seconds)
-    seconds["plan"] = time.perf_counter() - t2
+        return Outcome(INTERNAL, f"plan raised {type(exc).__name__}: {exc}", codes)
     if report is None or any(d.is_error and (d.code.startswith("MIL50") or d.code == "MIL514") for d in diags):
-        return Outcome(INCONSISTENT, f"plan refused what check accepted: {_errors(diags)}", codes, seconds)
+        return Outcome(INCONSISTENT, f"plan refused what check accepted: {_errors(diags)}", codes)
     if report.status in ("optimal", "feasible") and not all(math.isfinite(v) for row in report.plan for v in row):
-        return Outcome(NAN_STATE, f"plan ({report.status}) has a non-finite value", codes, seconds)
+        return Outcome(NAN_STATE, f"plan ({report.status}) has a non-finite value", codes)
     run_dir = scenario.parent.parent / "run"
     shutil.rmtree(run_dir, ignore_errors=True)
-    t3 = time.perf_counter()
     try:
         summary, diags = simulate_scenario(str(scenario), str(run_dir), duration=2.0)
     except Exception as exc:
-        return Outcome(INTERNAL, f"simulate raised {type(exc).__name__}: {exc}", codes, seconds)
-    seconds["simulate"] = time.perf_counter() - t3
+        return Outcome(INTERNAL, f"simulate raised {type(exc).__name__}: {exc}", codes)
     if summary is None:
-        return Outcome(INCONSISTENT, f"simulate refused what check accepted: {_errors(diags)}", codes, seconds)
+        return Outcome(INCONSISTENT, f"simulate refused what check accepted: {_errors(diags)}", codes)
     if summary.status != "complete":
-        return Outcome(INTERNAL, f"simulate ended '{summary.status}': {_errors(diags)}", codes, seconds)
+        return Outcome(INTERNAL, f"simulate ended '{summary.status}': {_errors(diags)}", codes)
     try:
         meta = json.loads((run_dir / "run.json").read_text(encoding="utf-8"))
     except (OSError, ValueError) as e:
-        return Outcome(INTERNAL, f"simulate left no readable run.json: {e}", codes, seconds)
+        return Outcome(INTERNAL, f"simulate left no readable run.json: {e}", codes)
     if meta.get("status") != "complete":
-        return Outcome(INTERNAL, f"run.json says '{meta.get('status')}' after a complete run", codes, seconds)
+        return Outcome(INTERNAL, f"run.json says '{meta.get('status')}' after a complete run", codes)
     nan = _nan_rows(run_dir / "trace.csv") or _nan_frames(run_dir / "frames.jsonl")
     if nan:
-        return Outcome(NAN_STATE, f"simulate wrote a non-finite state, {nan}", codes, seconds)
-    return Outcome(ACCEPTED, "", codes, seconds)
-
-
-def tally(outcomes: Iterable[Outcome], hang_s: float = 10.0) -> dict[str, int]:
-    """Counts over outcomes: inputs, refused (with diagnostics), accepted, each broken verdict,
-    and hangs (a case whose stages together took longer than ``hang_s`` [s])."""
-    counts: dict[str, int] = {"inputs": 0, REFUSED: 0, ACCEPTED: 0, INTERNAL: 0, INCONSISTENT: 0, NAN_STATE: 0,
-                              "hangs": 0}
-    for o in outcomes:
-        counts["inputs"] += 1
-        counts[o.verdict] = counts.get(o.verdict, 0) + 1
-        counts["hangs"] += sum(o.seconds.values()) > hang_s
-    return counts
+        return Outcome(NAN_STATE, f"simulate wrote a non-finite state, {nan}", codes)
+    return Outcome(ACCEPTED, "", codes)
