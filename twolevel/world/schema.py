@@ -47,8 +47,8 @@ MAX_ROUTE_POINTS = 20_000  # most reference points of a route (10 km at the defa
 
 Number = Annotated[float, Strict()]
 """A YAML number (an integer is fine). ``true``/``false`` and quoted text are refused; NaN and ±inf
-are refused by every model's ``allow_inf_nan=False`` (a range such as ``ge=0`` alone would let
-+inf through, and one without a bound lets NaN through)."""
+are refused by every model's ``allow_inf_nan=False`` (with pydantic 2.14 a range such as ``ge=0``
+alone lets +inf through, and a field without any bound lets NaN and ±inf through)."""
 Count = Annotated[int, Strict()]
 """A YAML integer; ``true``/``false``, ``2.5`` and quoted text are refused."""
 
