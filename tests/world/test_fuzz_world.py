@@ -42,8 +42,10 @@ def test_seeds_are_valid_and_use_every_kind_of_field() -> None:
             assert outcome.verdict == "accepted" and outcome.codes == (), (seed.name, outcome)
     text = dump(RICH.scenario) + dump(RICH.map)
     for key in ("points", "waypoints", "via", "s_range", "speed_range", "vehicle", "idm", "cycle", "script",
-                "successors", "lateral", "heading", "constants", "assumptions", "road_users"):
+                "successors", "lateral", "heading", "constants", "assumptions", "road_users", "expect",
+                "parameters", "variants"):
         assert f"{key}:" in text, key
+    assert "${" in text
 
 
 # ------------------------------------------------------------------------ the mutation engine

@@ -7,7 +7,7 @@ import math
 from pathlib import Path
 
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from twolevel.world.lint import lint_world_file
@@ -109,8 +109,21 @@ def test_expressions_compute_what_python_computes(a: float, b: float, c: float) 
 
 
 @pytest.mark.parametrize("text", ["__import__('os')", "a.real", "[a]", "a if a else b", "1 / 0", "10 ** 400",
-                                  "a < b", "'x'", "f(a)", ""])
+                                  "a < b", "'x'", "f(a)", "",
+                                  # each of these raised OverflowError, TypeError, MemoryError or
+                                  # ValueError through check (an internal error) (regressions)
+                                  "1" + "0" * 400, "abs(1, 2)", "(-8) ** 0.5", "-" * 100_000 + "1", "a\0"])
 def test_anything_else_is_refused(text: str) -> None:
     with pytest.raises(ExpressionError):
         evaluate(text, {"a": 1.0, "b": 2.0})
     assert math.isfinite(evaluate("a", {"a": 1.0}))
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.text(alphabet="0123456789.e+-*/()abminsx, ", max_size=40))
+def test_any_expression_text_gives_a_finite_number_or_an_expression_error(text: str) -> None:
+    try:
+        value = evaluate(text, {"a": 1.0, "b": -2.0})
+    except ExpressionError:
+        return
+    assert math.isfinite(value)

@@ -28,7 +28,7 @@ from twolevel.world.codes import (
 from twolevel.world.document import Document, Path_, read_document
 from twolevel.world.layout import check_layout, lane_lengths
 from twolevel.world.parameters import check_variants, explain, substitute
-from twolevel.world.schema import MAX_ROUTE_POINTS, MapFile, ScenarioFile
+from twolevel.world.schema import MAX_ROUTE_POINTS, MapFile, ParameterDeclarations, ScenarioFile
 
 __all__ = ["Map", "Scenario", "RuleFile", "load_map", "load_scenario", "check_world_file", "file_kind"]
 
@@ -630,7 +630,9 @@ def load_scenario(path: str | os.PathLike[str], parameters: Mapping[str, float] 
     sub, sdiags = substitute(doc, parameters)
     diags += sdiags
     if any(d.is_error for d in sdiags):
-        return None, diags
+        # a reference to a parameter whose declaration is invalid: say what is wrong with it too
+        declarations = Document(doc.path, {"parameters": doc.data.get("parameters", {})}, doc.where)
+        return None, diags + _validate(declarations, ParameterDeclarations)[1]
     doc = sub.document
     spec, vdiags = _validate(doc, ScenarioFile)
     if spec is None:

@@ -21,6 +21,7 @@ import difflib
 import math
 import operator
 import re
+import warnings
 from dataclasses import dataclass, replace
 from typing import Any, Callable, Mapping
 
@@ -81,15 +82,22 @@ def evaluate(text: str, env: Mapping[str, float]) -> float:
     :class:`ExpressionError` for anything but numbers, names, ``+ - * / **``, parentheses and
     ``min``, ``max``, ``abs``, or a result that is not a finite number."""
     try:
-        tree = ast.parse(text.strip(), mode="eval")
-    except SyntaxError:
+        with warnings.catch_warnings():  # "1in" warns of an invalid literal on stderr, then fails
+            warnings.simplefilter("ignore", SyntaxWarning)
+            tree = ast.parse(text.strip(), mode="eval")
+    except (SyntaxError, ValueError):  # ValueError: a NUL character
         raise ExpressionError(f"'{text.strip()}' is not an expression") from None
+    except (RecursionError, MemoryError):
+        raise ExpressionError(f"'{text.strip()[:40]}…' is nested too deeply") from None
 
     def ev(node: ast.AST) -> float:
         if isinstance(node, ast.Expression):
             return ev(node.body)
         if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
-            return float(node.value)
+            try:
+                return float(node.value)
+            except OverflowError:  # an integer beyond the floats
+                raise ExpressionError(f"'{text.strip()}' has a number too large for a float") from None
         if isinstance(node, ast.Name):
             if node.id not in env:
                 close = difflib.get_close_matches(node.id, list(env), n=1, cutoff=0.5)
@@ -102,17 +110,26 @@ def evaluate(text: str, env: Mapping[str, float]) -> float:
         if isinstance(node, ast.BinOp) and type(node.op) in _BINARY:
             left, right = ev(node.left), ev(node.right)
             try:
-                return float(_BINARY[type(node.op)](left, right))
+                result = _BINARY[type(node.op)](left, right)
             except (ZeroDivisionError, OverflowError):
                 raise ExpressionError(f"'{text.strip()}' has no value (division by zero or overflow)") from None
+            if isinstance(result, complex):  # a negative number to a fractional power
+                raise ExpressionError(f"'{text.strip()}' is not a real number")
+            return float(result)
         if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in _FUNCTIONS
                 and not node.keywords and node.args):
-            return float(_FUNCTIONS[node.func.id](*(ev(a) for a in node.args)))
+            args = [ev(a) for a in node.args]
+            if node.func.id == "abs" and len(args) != 1:
+                raise ExpressionError(f"'{text.strip()}': abs takes one value")
+            return float(_FUNCTIONS[node.func.id](*args) if len(args) > 1 or node.func.id == "abs" else args[0])
         raise ExpressionError(f"'{text.strip()}': only numbers, parameter names, + - * / **, parentheses, "
                               "min, max and abs are allowed")
 
-    value = ev(tree)
-    if isinstance(value, complex) or not math.isfinite(value):
+    try:
+        value = ev(tree)
+    except RecursionError:
+        raise ExpressionError(f"'{text.strip()[:40]}…' is nested too deeply") from None
+    if not math.isfinite(value):
         raise ExpressionError(f"'{text.strip()}' is not a finite number")
     return value
 

@@ -31,7 +31,7 @@ __all__ = [
     "RunSettings", "ScenarioFile", "KMH", "Number", "Count", "COORD_MAX",
     "TIME_MAX", "CONST_MAX", "SEED_MAX", "S_MAX", "MIN_PIECE", "MIN_SPACING", "MAX_ROUTE_POINTS",
     "UserBoundsSpec", "PedestrianBoundsSpec", "ResponseSpec", "AssumptionsSpec",
-    "GoalCriterion", "RoadCriterion", "Expect", "NormalDist", "Parameter", "Variant",
+    "GoalCriterion", "RoadCriterion", "Expect", "NormalDist", "Parameter", "ParameterDeclarations", "Variant",
 ]
 
 KMH = 1.0 / 3.6  # [m/s] per km/h
@@ -429,6 +429,10 @@ class AssumptionsSpec(_Model):
 # ------------------------------------------------- pass criteria, parameters and variants
 
 Finite = Number  # a number (not true or text), finite like every number of a scenario
+PARAM_MAX = 1e9
+"""Largest |value| of a parameter's range, choices, mean, default or a variant's value: whatever a
+field allows is far inside, and sampling between two of them cannot overflow."""
+ParamValue = Annotated[Number, Field(ge=-PARAM_MAX, le=PARAM_MAX)]
 
 
 def _switch(value: Any) -> Any:
@@ -482,8 +486,8 @@ class Expect(_Model):
 class NormalDist(_Model):
     """A normal distribution (truncated to the parameter's ``range`` when one is given)."""
 
-    mean: Finite = Field(description="mean")
-    std: Finite = Field(gt=0, description="standard deviation")
+    mean: ParamValue = Field(description="mean")
+    std: ParamValue = Field(gt=0, description="standard deviation")
 
 
 class Parameter(_Model):
@@ -491,11 +495,11 @@ class Parameter(_Model):
     numeric field: a ``range`` (uniform; grids take ``steps`` points), ``choices``, or a
     ``normal`` distribution (truncated to ``range`` if both are given)."""
 
-    range: tuple[Finite, Finite] | None = Field(default=None, description="[low, high]")
-    choices: list[Finite] | None = Field(default=None, min_length=1, description="the values it may take")
+    range: tuple[ParamValue, ParamValue] | None = Field(default=None, description="[low, high]")
+    choices: list[ParamValue] | None = Field(default=None, min_length=1, description="the values it may take")
     normal: NormalDist | None = Field(default=None, description="{mean, std}; truncated to range if given")
-    steps: int = Field(default=5, ge=1, le=1000, description="grid points across the range (sweep --grid)")
-    default: Finite | None = Field(default=None, description="nominal value; default: middle / first choice / mean")
+    steps: Count = Field(default=5, ge=1, le=1000, description="grid points across the range (sweep --grid)")
+    default: ParamValue | None = Field(default=None, description="nominal value; default: middle / first choice / mean")
     integer: bool = Field(default=False, description="round drawn values to whole numbers")
 
     @model_validator(mode="after")
@@ -530,12 +534,18 @@ class Parameter(_Model):
         return float(round(value)) if self.integer else float(value)
 
 
+class ParameterDeclarations(_Model):
+    """The ``parameters:`` of a scenario alone, validated before anything refers to them."""
+
+    parameters: dict[str, Parameter] = Field(default_factory=dict, description="parameters referenced as ${name}")
+
+
 class Variant(_Model):
     """A named case of the scenario for ``twolevel test``: parameter values, a seed, criteria."""
 
     name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_.\-]+$", description="name (letters, digits, _ . -)")
-    parameters: dict[str, Finite] = Field(default_factory=dict, description="parameter name → value")
-    seed: int | None = Field(default=None, ge=0, description="seed of this case; default: the scenario's")
+    parameters: dict[str, ParamValue] = Field(default_factory=dict, description="parameter name → value")
+    seed: Count | None = Field(default=None, ge=0, le=SEED_MAX, description="seed of this case; default: the scenario's")
     expect: Expect | None = Field(default=None, description="pass criteria of this case; default: the scenario's")
 
 
