@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
-from tests.world.test_loader import MAP, SCENARIO, write
+from helpers.world_files import MAP, SCENARIO, write
 from twolevel.cli import app
 from twolevel.world.loader import check_world_file, load_map, load_scenario
 

@@ -193,6 +193,7 @@ def probe(scenario: str | Path, *, run: bool = False, solver: str = "modes") -> 
     """Check ``scenario``; if check reports no error, load it and build its world, and with
     ``run`` also ``plan`` it (with ``solver``) and ``simulate --duration 2`` it (into
     ``<folder>/run``)."""
+    from twolevel.diagnostics import REGISTRY
     from twolevel.pipeline import check
 
     try:
@@ -200,9 +201,9 @@ def probe(scenario: str | Path, *, run: bool = False, solver: str = "modes") -> 
     except Exception as exc:  # the invariant: never
         return Outcome(INTERNAL, f"check raised {type(exc).__name__}: {exc}")
     codes = tuple(sorted({d.code for d in result.diagnostics}))
-    bad = [d for d in result.diagnostics if d.span.line < 1 or d.span.column < 1 or not d.code[:3] in ("YML", "STL", "CLI")]
+    bad = [d for d in result.diagnostics if d.span.line < 1 or d.span.column < 1 or d.code not in REGISTRY]
     if bad:
-        return Outcome(INTERNAL, f"diagnostic without a position or a stage code: {bad[0]}", codes)
+        return Outcome(INTERNAL, f"diagnostic without a position or a declared code: {bad[0]}", codes)
     if any(d.is_error for d in result.diagnostics):
         return Outcome(REFUSED, "", codes)
     stage = "load"
@@ -239,7 +240,7 @@ def _run(scenario: Path, solver: str, codes: tuple[str, ...]) -> Outcome:
         report, diags = plan_scenario(str(scenario), solver=solver, time_limit=5.0)
     except Exception as exc:
         return Outcome(INTERNAL, f"plan raised {type(exc).__name__}: {exc}", codes)
-    if report is None or any(d.is_error and (d.code.startswith("MIL50") or d.code == "MIL514") for d in diags):
+    if report is None or any(d.bad_input for d in diags):  # what the CLI exits 2 on
         return Outcome(INCONSISTENT, f"plan refused what check accepted: {_errors(diags)}", codes)
     if report.status in ("optimal", "feasible") and not all(math.isfinite(v) for row in report.plan for v in row):
         return Outcome(NAN_STATE, f"plan ({report.status}) has a non-finite value", codes)
