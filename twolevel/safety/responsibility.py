@@ -2,9 +2,11 @@
 
 :func:`classify` decides one collision episode, in this order:
 
-1. **ego standing** — the ego's speed at contact is at most ``stop_speed``: not the ego's fault
-   (a standing ego outside every other lane is hit only by someone who left its lane, drove
-   backwards or ran into a standing car; the verifier only lets the ego stop there);
+1. **ego standing** — the ego's speed at contact is at most ``stop_speed`` and it stands outside
+   every other lane: not the ego's fault (a standing ego there is hit only by someone who left
+   its lane, drove backwards or ran into a standing car; the verifier only lets the ego stop
+   there). An ego that stopped inside another lane (``standing_in``: a crossing lane, say) is
+   judged by the rules below like a moving one;
 2. **hit from behind** — the other came from behind on the ego's lane (behind the ego's centre
    along the ego's heading, within its width, heading within 45° of it, on the same lane when
    lanes are known) and the ego had been on that lane for at least RSS's response time ρ of
@@ -65,13 +67,14 @@ class Responsibility:
 def classify(t: np.ndarray, ego: np.ndarray, other: np.ndarray, ego_box: tuple[float, float],
              other_box: tuple[float, float], *, other_inside: np.ndarray | None = None,
              ego_lane: np.ndarray | None = None, other_lane: np.ndarray | None = None, stop_speed: float = 0.1,
-             response_time: float = 2.0) -> Responsibility:
+             response_time: float = 2.0, standing_in: str | None = None) -> Responsibility:
     """Classify the collision in the recording ``t`` (T,) [s] with the ego's and the other's
     ``[x, y, psi, v]`` (T, 4) [m, m, rad, m/s] and boxes (length, width) [m]: contact is the first
     sample at which the boxes overlap (the last sample if none does). ``other_inside`` (T,): whether
     the other was inside its predicted occupancy at each sample (None: assumed inside); lanes (T,)
     (−1: off every lane; None: unknown); ``stop_speed`` [m/s]; ``response_time`` [s]: RSS's ρ of
-    others."""
+    others; ``standing_in``: the other lane the ego's box overlaps at contact (None: none, or
+    unknown; :func:`~twolevel.safety.verify.standstill_lane`)."""
     t = np.asarray(t, dtype=float)
     ego, other = np.asarray(ego, dtype=float), np.asarray(other, dtype=float)
     eb = box_corners(ego[:, 0], ego[:, 1], ego[:, 2], ego_box[0], ego_box[1])
@@ -86,7 +89,7 @@ def classify(t: np.ndarray, ego: np.ndarray, other: np.ndarray, ego_box: tuple[f
     def done(verdict: str, reason: str) -> Responsibility:
         return Responsibility(verdict, verdict == EGO_AT_FAULT, float(t[c]), v_ego, left_at, reason)
 
-    if abs(v_ego) <= stop_speed:
+    if abs(v_ego) <= stop_speed and standing_in is None:
         return done(EGO_STANDING, f"the ego was standing ({abs(v_ego):.2f} m/s) when it was hit")
     if _from_behind(t, ego, other, ego_box, other_box, ego_lane, other_lane, c, response_time):
         return done(HIT_FROM_BEHIND, "hit from behind on its lane, where it had been for at least the others' "
@@ -94,6 +97,9 @@ def classify(t: np.ndarray, ego: np.ndarray, other: np.ndarray, ego_box: tuple[f
     if left_at is not None:
         return done(OTHER_BROKE_ASSUMPTIONS, f"the other left its predicted occupancy at {left_at:.1f} s "
                                              "(it broke the declared assumptions)")
+    if abs(v_ego) <= stop_speed:
+        return done(EGO_AT_FAULT, f"the ego stood inside lane '{standing_in}', where the other may legally come, "
+                                  "and the other stayed within its predicted occupancy")
     return done(EGO_AT_FAULT, "the ego moved into a participant that stayed within its predicted occupancy")
 
 

@@ -66,7 +66,7 @@ from twolevel.world.traffic import TrafficState
 from twolevel.world.world import World
 
 __all__ = ["VerifySettings", "Context", "Refutation", "Verdict", "TimeToReact", "context", "verify_step",
-           "verify_initial_state", "time_to_react", "ego_params"]
+           "verify_initial_state", "time_to_react", "ego_params", "standstill_lane"]
 
 
 @dataclass(frozen=True)
@@ -285,8 +285,9 @@ def _first_collision(occ: Occupancy, checked: np.ndarray, sw: _Sweep) -> int | N
     return int(cand[hit][order[0]])
 
 
-def _standstill_lane(ctx: Context, state: np.ndarray) -> int | None:
-    """The other lane the ego's box at rest overlaps (None: invariably safe)."""
+def standstill_lane(ctx: Context, state: np.ndarray) -> int | None:
+    """The other lane (index) the ego's box at rest overlaps at ``state`` (its first three
+    components X, Y [m], ψ [rad]); None: standing there is invariably safe."""
     net = ctx.network
     if not len(net.foreign):
         return None
@@ -386,7 +387,7 @@ def _judge(ctx: Context, occ: Occupancy, sw: _Sweep, fs: FailSafe, checked: np.n
         j = int(occ.interval[hit])
         return Refutation(fs.name, "collision", ctx.world.parts.ids[int(occ.owner[hit])],
                           float(occ.intervals.t[j]), float(occ.intervals.t[j + 1]))
-    lane = _standstill_lane(ctx, fs.states[-1])
+    lane = standstill_lane(ctx, fs.states[-1])
     if lane is not None:
         return Refutation(fs.name, "standstill", lane=ctx.world.lanes.lanes[lane].id)
     return None
