@@ -1,4 +1,5 @@
-"""The low level's decision logic on real worlds, rules, rollouts and monitors."""
+"""The low level's decision logic on real worlds, rules, rollouts and monitors (the paper's low level:
+the safety layer off; tests/control/low_level/test_guard.py has it on)."""
 
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ from helpers.mpc_worlds import highway_world
 
 
 def _decide(w, rs, v: float, u: np.ndarray, *, samples: int = 200, step: int = 0, least: bool = True):
-    ll = LowLevelController.from_rulesets(w, [rs], settings=LowLevelSettings(samples=samples, seed=7,
+    ll = LowLevelController.from_rulesets(w, [rs], settings=LowLevelSettings(samples=samples, seed=7, safety=False,
                                                                              least_violation=least))
     x0 = fw.initial_state(w.ego.x, w.ego.y, w.ego.psi, v)
     return ll.decide(x0, u, 0.0, w.traffic0, Memory.fresh(w), 20.0, None, step=step)
@@ -64,11 +65,11 @@ def test_a_standing_car_that_braking_cannot_help_takes_the_least_violating_choic
     # braking keeps it there; moving back towards its lane violates less
     rules = "input float min_gap\nsafe = always[0:1] collision_free(1.0);\n"
     w, rs = highway_world(tmp_path, rules, "{id: passing, behaviour: constant_velocity, start: {lane: left, s: 14}, speed: 14}")
-    ll = LowLevelController.from_rulesets(w, [rs], settings=LowLevelSettings(samples=40, seed=7))
+    ll = LowLevelController.from_rulesets(w, [rs], settings=LowLevelSettings(samples=40, seed=7, safety=False))
     x0 = fw.initial_state(w.ego.x, w.ego.y + 1.5, 0.15, 0.0)
     u = np.tile([-0.4, 2.0], (10, 1))
     d = ll.decide(x0, u, 0.0, w.traffic0, Memory.fresh(w), 20.0, None)
-    plain = LowLevelController.from_rulesets(w, [rs], settings=LowLevelSettings(samples=40, seed=7, least_violation=False))
+    plain = LowLevelController.from_rulesets(w, [rs], settings=LowLevelSettings(samples=40, seed=7, least_violation=False, safety=False))
     b = plain.decide(x0, u, 0.0, w.traffic0, Memory.fresh(w), 20.0, None)
     assert b.decision == "brake" and b.robustness["safe"] < 0
     assert d.decision == "least_violation" and d.robustness["safe"] > b.robustness["safe"]

@@ -11,7 +11,16 @@ Each step, given the MPC's optimal controls u* = [δ, a] over the horizon:
    :mod:`twolevel.control.low_level.screening`; decision ``sampled``: the best-cost candidate
    that satisfies every rule); if none of the sampling budget does, brake fully (decision
    ``brake``) — or, for a standing car where braking is worse, apply the least-violating
-   choice (decision ``least_violation``; :mod:`twolevel.control.low_level.brake`).
+   choice (decision ``least_violation``; :mod:`twolevel.control.low_level.brake`);
+4. **the safety layer** (on by default, :mod:`twolevel.control.low_level.guard`): u*_0 is
+   verified first; when it does not verify the plan is unsafe and the step is an emergency:
+   the fail-safe verified earlier runs at once (decision ``failsafe``), nothing is sampled. When
+   it verifies and the rules hold, it runs; when the rules chose another control (a candidate,
+   the brake), that one is verified in turn, and runs if it verifies, else the fail-safe does.
+   So a control runs only if a fail-safe after it was verified, whatever the planner and
+   whichever rules the scenario lists. With the layer on, sampling is cut to its first round
+   (``safety_rounds``; :mod:`twolevel.control.low_level.sampling`): no step spends the whole
+   budget before it brakes.
 
 The answer is a :class:`~twolevel.control.low_level.decision.Decision`; the rules as the low
 level judges them are :class:`~twolevel.control.low_level.rules.RuleCheck` s.
@@ -26,13 +35,15 @@ import numpy as np
 
 from twolevel.control.low_level.brake import STANDING, full_brake, prefer_least_violation
 from twolevel.control.low_level.decision import Action, Choice, Decision
+from twolevel.control.low_level.guard import OFF, Check, Guard
 from twolevel.control.low_level.judge import Judge, history_length
 from twolevel.control.low_level.prediction import Predictor
 from twolevel.control.low_level.rules import RuleCheck, prefix_bounded, rule_checks
 from twolevel.control.low_level.sampling import sample_ball
 from twolevel.control.low_level.settings import LowLevelSettings
-from twolevel.models.actuation import gamma_from_accel
+from twolevel.models.actuation import accel_from_gamma, gamma_from_accel
 from twolevel.models.params import VehicleParams
+from twolevel.safety.verify import Context, Verdict, context
 from twolevel.stl import analysis
 from twolevel.stl.typecheck import RuleSet
 from twolevel.world.sensing import Memory, Others, others_predicted
@@ -46,12 +57,12 @@ class LowLevelController:
     """The paper's bottom level (see the module docstring)."""
 
     def __init__(self, world: World, rules: Sequence[RuleCheck], *, params: VehicleParams | None = None,
-                 settings: LowLevelSettings | None = None, consts: Mapping[str, float] | None = None) -> None:
+                 settings: LowLevelSettings | None = None, consts: Mapping[str, float] | None = None,
+                 safety: Context | None = None) -> None:
         self.world = world
         self.rules = list(rules)
         self.params = params or VehicleParams()
-        self.settings = settings or LowLevelSettings(r=world.settings.r, samples=world.settings.samples,
-                                                     seed=world.settings.seed)
+        self.settings = settings or LowLevelSettings.of(world.settings)
         self.consts = dict(consts or {})
         self.H = world.settings.H
         self.dt = world.settings.dt
@@ -60,6 +71,7 @@ class LowLevelController:
         self.predictor = Predictor(self.params, self.H, self.dt, self.settings.backend, reads_a)
         self.cuts = tuple(sorted({j for j in self.settings.screen if 0 < j < self.H}))
         self._screens = bool(self.cuts) and bool(self.rules) and all(prefix_bounded(r.formula) for r in self.rules)
+        self.guard = Guard(safety or context(world, self.params)) if self.settings.safety else None
 
     @classmethod
     def from_rulesets(cls, world: World, rulesets: Sequence[RuleSet], **kw: object) -> "LowLevelController":
@@ -97,27 +109,73 @@ class LowLevelController:
 
         ro = self.predictor.plan(x0, u_star, tm)
         gamma_star = gamma_from_accel(u_star[:, 1], ro.states[0, :-1, 3], self.params)
+        intended = np.stack([u_star[:, 0], gamma_star], axis=1)
         rob = judge(ro.states, u_star[None, :, 1], u_star[None, :, 0])
         mpc_rob = {k: float(v[0]) for k, v in rob.items()}
-        mpc = Choice(min(mpc_rob.values()) if mpc_rob else np.inf, np.array([u_star[0, 0], gamma_star[0]]),
+        mpc = Choice(min(mpc_rob.values()) if mpc_rob else np.inf, intended[0].copy(),
                      float(u_star[0, 1]), mpc_rob, ro.states[0])
+        guard = self.guard
+        first = self._verify(x0, mpc.control, traffic, t, s0, tm) if guard is not None else None
+        if first is not None and not first.verified:  # the plan is unsafe: no sampling, the fail-safe now
+            return self._fall_back(x0, u_star, mpc, first, 0, mpc_rob, intended, tm, t_start)
         if all(v >= 0 for v in mpc_rob.values()):
-            return self._done(Action.MPC, mpc, 0, mpc_rob, tm, t_start)
+            safety = guard.commit(first) if guard is not None and first is not None else OFF
+            return self._done(Action.MPC, mpc, 0, mpc_rob, intended, safety, tm, t_start)
 
         target = ro.states[0][:, [0, 1, 2, 3]] if target is None else np.asarray(target, dtype=float)
         rng = np.random.default_rng((st.seed, step))
         exact_worst = st.least_violation and abs(v_now) < STANDING  # the least-violating choice needs it
         sampled = sample_ball(x0, u_star, gamma_star, target, mpc if rob else None, st, rng, self.predictor, judge,
-                              self.cuts, self._screens, exact_worst, tm)
+                              self.cuts, self._screens, exact_worst, tm, st.safety_rounds if guard is not None else None)
         if sampled.found is not None:
-            return self._done(Action.SAMPLED, sampled.found, sampled.tried, mpc_rob, tm, t_start)
-        braking = full_brake(x0, u_star, self.predictor, judge, tm)
-        if prefer_least_violation(sampled.best, braking, v_now, st.least_violation):
-            assert sampled.best is not None
-            return self._done(Action.LEAST_VIOLATION, sampled.best, sampled.tried, mpc_rob, tm, t_start)
-        return self._done(Action.BRAKE, braking, sampled.tried, mpc_rob, tm, t_start)
+            action, choice = Action.SAMPLED, sampled.found
+        else:
+            braking = full_brake(x0, u_star, self.predictor, judge, tm)
+            if prefer_least_violation(sampled.best, braking, v_now, st.least_violation):
+                assert sampled.best is not None
+                action, choice = Action.LEAST_VIOLATION, sampled.best
+            else:
+                action, choice = Action.BRAKE, braking
+        if guard is None or first is None:
+            return self._done(action, choice, sampled.tried, mpc_rob, intended, OFF, tm, t_start)
+        again = first if np.array_equal(choice.control, mpc.control) else self._verify(x0, choice.control, traffic,
+                                                                                      t, s0, tm)
+        if not again.verified:
+            return self._fall_back(x0, u_star, choice, again, sampled.tried, mpc_rob, intended, tm, t_start)
+        return self._done(action, choice, sampled.tried, mpc_rob, intended, guard.commit(again), tm, t_start)
 
-    def _done(self, action: Action, choice: Choice, tried: int, mpc_rob: dict[str, float], tm: dict[str, float],
-              t_start: float) -> Decision:
+    def start(self, x0: np.ndarray, traffic: TrafficState, t: float, s0: float) -> Verdict | None:
+        """Check the initial state (:meth:`Guard.start`); None when the safety layer is off."""
+        return self.guard.start(x0, traffic, t, s0) if self.guard is not None else None
+
+    def _verify(self, x0: np.ndarray, control: np.ndarray, traffic: TrafficState, t: float, s0: float,
+                tm: dict[str, float]) -> Verdict:
+        assert self.guard is not None
+        t0 = time.perf_counter()
+        v = self.guard.verify(x0, control, traffic, t, s0)
+        tm["verify"] = tm.get("verify", 0.0) + (time.perf_counter() - t0) * 1e3
+        return v
+
+    def _fall_back(self, x0: np.ndarray, u_star: np.ndarray, choice: Choice, refuted: Verdict, tried: int,
+                   mpc_rob: dict[str, float], intended: np.ndarray, tm: dict[str, float], t_start: float
+                   ) -> Decision:
+        """The kept fail-safe's command (decision ``failsafe``); without one, full braking with the
+        plan's steering, unverified (decision ``brake``)."""
+        assert self.guard is not None
+        u, safety = self.guard.fall_back(x0, refuted)
+        if u is None:
+            brake = Choice(choice.worst, np.array([u_star[0, 0], -1.0]), self._accel(-1.0, x0), choice.robustness,
+                           choice.states)
+            return self._done(Action.BRAKE, brake, tried, mpc_rob, intended, safety, tm, t_start)
+        run = Choice(choice.worst, u, self._accel(float(u[1]), x0), choice.robustness, choice.states)
+        return self._done(Action.FAILSAFE, run, tried, mpc_rob, intended, safety, tm, t_start)
+
+    def _accel(self, gamma: float, x0: np.ndarray) -> float:
+        """The acceleration [m/s²] γ commands at the car's speed (quasi-static)."""
+        return float(accel_from_gamma(gamma, max(float(x0[3]), 0.0), self.params))
+
+    def _done(self, action: Action, choice: Choice, tried: int, mpc_rob: dict[str, float], intended: np.ndarray,
+              safety: Check, tm: dict[str, float], t_start: float) -> Decision:
         tm["total"] = (time.perf_counter() - t_start) * 1e3
-        return Decision(action, choice.control, choice.accel, tried, choice.robustness, mpc_rob, choice.states, tm)
+        return Decision(action, choice.control, choice.accel, tried, choice.robustness, mpc_rob, choice.states, tm,
+                        safety, intended)

@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from twolevel.control.low_level.guard import OFF, Check
 from twolevel.milp.solution import ValueEnum
 
 __all__ = ["Action", "Choice", "Decision"]
@@ -22,6 +23,9 @@ class Action(ValueEnum):
     """Full braking: nothing in the sampling budget satisfies every rule."""
     LEAST_VIOLATION = "least_violation"
     """The least-violating choice (u* or a candidate) of a standing car, where braking is worse."""
+    FAILSAFE = "failsafe"
+    """The fail-safe verified at an earlier step, one step further: the control the rules chose
+    (u*, a candidate or the brake) did not verify (:mod:`twolevel.control.low_level.guard`)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -44,9 +48,11 @@ class Decision:
     ``decision``: the :class:`Action`; ``control`` = [δ rad, γ] applied now; ``accel``
     [m/s²]: the acceleration that γ commands at the current speed (quasi-static);
     ``candidates``: sampled candidates evaluated (0 when u* held); ``robustness``: each rule's
-    robustness at t + dt for the applied choice (for ``brake``: the braking rollout's);
-    ``mpc_robustness``: u*'s; ``states`` (H+1, 12): the applied choice's predicted detailed
-    trajectory; ``timings_ms``: rollout / signals / monitor / total."""
+    robustness at t + dt for the choice the rules made (for ``brake``: the braking rollout's);
+    ``mpc_robustness``: u*'s; ``states`` (H+1, 12): that choice's predicted detailed
+    trajectory; ``timings_ms``: rollout / signals / monitor / verify / total; ``safety``: what
+    the safety layer did (:class:`~twolevel.control.low_level.guard.Check`; ``off`` when it is
+    off); ``intended`` (H, 2) [δ rad, γ]: u* as actuator commands (for the time to react)."""
 
     decision: Action
     control: np.ndarray
@@ -56,6 +62,8 @@ class Decision:
     mpc_robustness: dict[str, float]
     states: np.ndarray
     timings_ms: dict[str, float] = field(default_factory=dict)
+    safety: Check = OFF
+    intended: np.ndarray | None = None
 
     @property
     def violated(self) -> tuple[str, ...]:
