@@ -57,6 +57,8 @@ class PlanStatus(ValueEnum):
     """No plan satisfies every rule (a solve path's answer before the fallback)."""
     TIME_LIMIT = "time_limit"
     """No plan found within the time limit (a solve path's answer before the fallback)."""
+    UNCHECKED = "unchecked"
+    """A plan made without regard to the rules (:mod:`twolevel.control.reckless`)."""
 
     @property
     def ok(self) -> bool:
