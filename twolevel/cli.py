@@ -276,7 +276,8 @@ def _summary_rows(s) -> list[tuple[str, str]]:  # noqa: ANN001 - RunSummary, imp
 
     rows = [
         ("status", s.status),
-        ("controller", s.controller + ("" if s.monitor else " (no monitor)")),
+        ("controller", s.controller + ("" if s.monitor else " (no monitor)")
+         + ("" if not s.monitor or s.safety else " (no safety layer)")),
         ("simulated time", f(s.duration, "s", 4)),
         ("goal reached at", "-" if s.goal_reached_t is None else f(s.goal_reached_t, "s", 4)),
         ("steps", str(s.steps)),
@@ -290,7 +291,15 @@ def _summary_rows(s) -> list[tuple[str, str]]:  # noqa: ANN001 - RunSummary, imp
         ("max speed over the limit", f(s.speed_over_limit_max, "m/s")),
         ("min distance (centres)", f(s.min_distance, "m")),
         ("min gap (boxes)", f(s.min_gap, "m")),
-        ("collisions", str(len(s.collisions)) + "".join(f"\n  t={c.t:.1f} s with {c.other} at ({c.x:.1f}, {c.y:.1f})" for c in s.collisions)),
+        ("collisions", str(len(s.collisions)) + "".join(
+            f"\n  t={c.t:.1f} s with {c.other} at ({c.x:.1f}, {c.y:.1f}): "
+            + ("EGO AT FAULT" if c.at_fault else "not at fault") + f" ({c.verdict})" for c in s.collisions)),
+        ("collisions the ego's fault", str(s.at_fault)),
+        ("safe start", "-" if s.safe_start is None else ("yes" if s.safe_start else "NO (no fail-safe at t = 0)")),
+        ("verification", ", ".join(f"{k}: {n}" for k, n in sorted(s.verification.items())) or "-"),
+        ("min time to react", f(s.ttr_min_s, "s")),
+        ("peak deceleration", f(s.decel_peak, "m/s²")),
+        ("steps braking > 4 m/s²", "-" if s.hard_braking_share != s.hard_braking_share else f"{100 * s.hard_braking_share:.1f} %"),
     ]
     for v in s.violations:
         rows.append((f"rule {v.rule}", "holds" if v.steps == 0 else f"violated in {v.steps} steps from t={v.first_t:.1f} s (worst {v.worst:.3g})"))
@@ -302,8 +311,9 @@ def _summary_rows(s) -> list[tuple[str, str]]:  # noqa: ANN001 - RunSummary, imp
 def simulate(
     scenario: str = typer.Argument(..., metavar="SCENARIO.yaml", help="A scenario file."),
     out: Optional[str] = typer.Option(None, "--out", "-o", metavar="RUN_DIR", help="Run directory (default: runs/<scenario name>)."),
-    no_monitor: bool = typer.Option(False, "--no-monitor", help="Apply the MPC's controls directly (the paper's 'without monitor')."),
-    controller: str = typer.Option("twolevel", "--controller", help="twolevel (MPC + monitor), or a baseline such as nmpc."),
+    no_monitor: bool = typer.Option(False, "--no-monitor", help="Apply the MPC's controls directly (the paper's 'without monitor'): no low level, no safety layer."),
+    no_safety: bool = typer.Option(False, "--no-safety", help="The paper's low level alone: rules checked, controls not verified (no fail-safes)."),
+    controller: str = typer.Option("twolevel", "--controller", help="twolevel (the MILP MPC), nmpc (baseline) or reckless (ignores traffic and rules); the low level checks each."),
     nmpc_model: str = typer.Option("kinematic", "--nmpc-model", help="With --controller nmpc: kinematic or fourwheel."),
     seed: Optional[int] = typer.Option(None, "--seed", min=0, help="Override the scenario's seed."),
     duration: Optional[float] = typer.Option(None, "--duration", metavar="SECONDS", help="Override the scenario's duration."),
@@ -338,10 +348,11 @@ def simulate(
                        info=f"t={info.t:5.1f}/{info.duration:.0f} s  {info.rate_hz:6.1f} Hz  near={info.n_near:2d}  {info.decision}")
 
         with bar:
-            summary, diags = simulate_scenario(scenario, run_dir, monitor=not no_monitor, controller=ctrl, seed=seed,
-                                               duration=duration, progress=on_step)
+            summary, diags = simulate_scenario(scenario, run_dir, monitor=not no_monitor, safety=not no_safety,
+                                               controller=ctrl, seed=seed, duration=duration, progress=on_step)
     else:
-        summary, diags = simulate_scenario(scenario, run_dir, monitor=not no_monitor, controller=ctrl, seed=seed, duration=duration)
+        summary, diags = simulate_scenario(scenario, run_dir, monitor=not no_monitor, safety=not no_safety,
+                                           controller=ctrl, seed=seed, duration=duration)
     if summary is None:
         _print_diagnostics(diags)
         raise typer.Exit(EXIT_USAGE)

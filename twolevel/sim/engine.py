@@ -10,8 +10,10 @@ of :class:`ClosedLoop`:
    and stop-sign memory, and the recorded history of every signal;
 3. **check**: the low level (:mod:`twolevel.control.low_level.controller`) forward-simulates the
    detailed model under the plan, monitors every rule and applies u*, a sampled control or full
-   braking. With ``monitor=False`` (the paper's "without monitor") the plan's first control is
-   applied directly (a → γ by the actuation map);
+   braking — each only when the safety layer verifies it, else the fail-safe verified earlier
+   (:mod:`twolevel.control.low_level.guard`; ``safety=False`` leaves the paper's low level
+   alone). With ``monitor=False`` (the paper's "without monitor") the plan's first control is
+   applied directly (a → γ by the actuation map), unchecked and unverified;
 4. **advance** the world: the ego's plant is the detailed four-wheel model
    (:mod:`twolevel.models.fourwheel`, compiled rollout with H = 1), the other participants
    step by their behaviours with the ego as a leader for IDM, lights cycle;
@@ -21,13 +23,28 @@ of :class:`ClosedLoop`:
    (:mod:`twolevel.sim.robustness`).
 
 Collisions (overlapping oriented boxes, checked against every vehicle, not only the sensed
-ones) are recorded with time, place and the other vehicle, never hidden.
+ones) are recorded with time, place, the other vehicle and who is responsible
+(:mod:`twolevel.sim.collisions`), never hidden.
+
+**The safety layer.** Before the first step the initial state is checked
+(:func:`~twolevel.safety.verify.verify_initial_state`); a start without a fail-safe is reported
+(SIM616, and ``run.json``'s ``safety.initial``) and the run goes on: until a control verifies
+the low level brakes, and those steps are recorded as ``unverified``. Every step records the
+outcome (``verification``: verified / failsafe / unverified / off), the fail-safe in force
+(``failsafe``), why the rules' choice did not verify (``refuted``) and, every
+:data:`TTR_EVERY` steps, the **time to react** ``ttr_s`` [s]
+(:func:`~twolevel.safety.verify.time_to_react` of the intended plan held on to
+:data:`TTR_HORIZON`: how long the car could still follow it before a fail-safe becomes
+necessary; −dt: not even now; ``TTR_HORIZON``: at least that long; empty between). It costs up
+to a handful of verifications, so it is computed every few steps and not counted in the control
+step's time; it is computed in every run, the layer on or off.
 
 **The trace.** One row per step: :data:`~twolevel.sim.trace.BASE_COLUMNS`, the signal columns
 the rules read (a, s, e, d_stop, light_red, d_light, d_lead, v_lead; v, v_max, min_gap and
 n_near are base columns), a few controller columns (``candidates``; ``ll_violated``: the rules u*
 broke on the detailed prediction, i.e. why the low level intervened; ``hl_status``, ``hl_qps``,
-``t_plant_ms``), then ``rob_<rule>`` per rule: the robustness at that step on the *executed*
+``t_plant_ms``; the safety layer's ``verification``, ``failsafe``, ``refuted``, ``ttr_s``,
+``t_verify_ms``), then ``rob_<rule>`` per rule: the robustness at that step on the *executed*
 trajectory, by the online monitor — exactly what ``twolevel monitor rules.stl trace.csv``
 computes from the same file. A rule whose window looks ahead L steps is final L steps later, so
 rows are written with that delay; when the run ends, is interrupted (Ctrl-C) or crashes, the
@@ -39,7 +56,7 @@ stands still (speed ≤ the scenario's stop_speed) within :data:`GOAL_ZONE` of t
 the summary (and ``run.json``) records that time as ``goal_reached_t`` [s] (None otherwise).
 
 **Determinism.** Everything but the timing columns (``t_high_ms``, ``t_low_ms``, ``t_step_ms``,
-``t_plant_ms``) is a function of the scenario and the seed, provided the high level is
+``t_plant_ms``, ``t_verify_ms``) is a function of the scenario and the seed, provided the high level is
 (its time limit can make a plan depend on the machine's speed; the default mode search is
 deterministic in practice).
 """
@@ -58,6 +75,8 @@ from typing import Callable
 import numpy as np
 
 from twolevel.control.low_level.controller import LowLevelController
+from twolevel.control.low_level.guard import OFF, Check
+from twolevel.control.low_level.settings import LowLevelSettings
 from twolevel.control.low_level.rules import RuleCheck, rule_checks
 from twolevel.control.planner import EgoState, Planner, PlanResult, PlanStatus, Snapshot
 from twolevel.control.registry import CONTROLLERS, planner_named
@@ -66,7 +85,8 @@ from twolevel.models import fourwheel as fw
 from twolevel.models.actuation import gamma_from_accel
 from twolevel.models.params import VehicleParams
 from twolevel.models.rollout import rollout
-from twolevel.sim.codes import SIM610, SIM611, SIM612, SIM613, SIM614, SIM615
+from twolevel.safety.verify import Verdict, context, time_to_react
+from twolevel.sim.codes import SIM610, SIM611, SIM612, SIM613, SIM614, SIM615, SIM616
 from twolevel.sim.collisions import CollisionLog
 from twolevel.sim.frames import FrameWriter
 from twolevel.sim.history import History
@@ -86,12 +106,17 @@ __all__ = ["simulate_scenario", "ClosedLoop", "StepInfo", "RunSummary", "Collisi
 
 GOAL_ZONE = 1.0
 """[m] How far before the goal a standstill counts as arrived."""
-TIMING_COLUMNS = ("t_high_ms", "t_low_ms", "t_step_ms", "t_plant_ms")
+TIMING_COLUMNS = ("t_high_ms", "t_low_ms", "t_step_ms", "t_plant_ms", "t_verify_ms")
 """Wall-clock columns (excluded from determinism comparisons)."""
 SIGNAL_COLUMNS = tuple(name for name in SIGNALS if name not in BASE_COLUMNS)
 """Signal columns beyond the base ones, named as the rules read them (a, s, e, d_stop, light_red,
 d_light, d_lead, v_lead)."""
-EXTRA_COLUMNS = ("candidates", "ll_violated", "hl_status", "hl_qps", "t_plant_ms")
+EXTRA_COLUMNS = ("candidates", "ll_violated", "hl_status", "hl_qps", "t_plant_ms", "verification", "failsafe",
+                 "refuted", "ttr_s", "t_verify_ms")
+TTR_EVERY = 5
+"""The time to react is computed every this many steps (see the module docstring)."""
+TTR_HORIZON = 3.0
+"""[s] The intended plan, its last command held, is followed at most this long for the time to react."""
 _LIGHT_NAMES = {0: "green", 1: "yellow", 2: "red"}
 
 
@@ -100,6 +125,7 @@ def simulate_scenario(
     out_dir: str,
     *,
     monitor: bool = True,
+    safety: bool = True,
     controller: str = "twolevel",
     seed: int | None = None,
     duration: float | None = None,
@@ -108,7 +134,8 @@ def simulate_scenario(
 ) -> tuple[RunSummary | None, list[Diagnostic]]:
     """Run ``scenario_path`` in closed loop and write the run directory ``out_dir``.
 
-    ``monitor=False`` applies the plan's controls directly (the paper's "without monitor").
+    ``monitor=False`` applies the plan's controls directly (the paper's "without monitor");
+    ``safety=False`` keeps the paper's low level but without the safety layer (no verification).
     ``controller``: the high level, one of :data:`~twolevel.control.registry.CONTROLLERS`.
     ``seed`` / ``duration`` [s] override the scenario's ``run`` settings. ``progress`` is called
     after every step with a :class:`StepInfo`; if it raises ``KeyboardInterrupt`` the run stops
@@ -133,7 +160,7 @@ def simulate_scenario(
     run = scn.spec.run.model_copy(update={k: v for k, v in (("seed", seed), ("duration", duration)) if v is not None})
     scn = replace(scn, spec=scn.spec.model_copy(update={"run": run}))
     world = build_world(scn)
-    loop, more = ClosedLoop.create(world, scn, monitor=monitor, controller=controller)
+    loop, more = ClosedLoop.create(world, scn, monitor=monitor, controller=controller, safety=safety)
     diags += more
     if loop is None:
         return None, diags
@@ -184,14 +211,19 @@ class Sensed:
 @dataclass(frozen=True, eq=False)
 class Applied:
     """What the check decided: ``control`` [δ rad, γ] applied now, the ``accel`` [m/s²] it
-    commands, the trace's ``decision``, the ``candidates`` sampled and the rules u* violated on
-    the detailed prediction (``violated``, space-separated)."""
+    commands, the trace's ``decision``, the ``candidates`` sampled, the rules u* violated on
+    the detailed prediction (``violated``, space-separated), the safety layer's record
+    (``safety``; its verification time ``verify_ms``) and the plan as actuator commands
+    (``intended`` (H, 2) [δ rad, γ])."""
 
     control: np.ndarray
     accel: float
     decision: StepDecision
     candidates: int
     violated: str
+    safety: Check = OFF
+    verify_ms: float = 0.0
+    intended: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -230,12 +262,18 @@ class LoopStats:
     min_gap: list[float] = field(default_factory=list)
     """Box separation to the nearest vehicle [m]."""
     decisions: list[StepDecision] = field(default_factory=list)
+    speeds: list[float] = field(default_factory=list)
+    """Signed speed [m/s]."""
+    outcomes: list[str] = field(default_factory=list)
+    """The safety layer's outcome."""
+    ttr: list[float] = field(default_factory=list)
+    """Time to react [s] (NaN where not computed)."""
 
     def __len__(self) -> int:
         return len(self.step_ms)
 
     def add(self, times: StepTimes, tracking: float, over_limit: float, min_dist: float, min_gap: float,
-            decision: StepDecision) -> None:
+            decision: StepDecision, speed: float, outcome: str, ttr: float) -> None:
         self.step_ms.append(times.step)
         self.high_ms.append(times.high)
         self.low_ms.append(times.low)
@@ -244,6 +282,9 @@ class LoopStats:
         self.min_dist.append(min_dist)
         self.min_gap.append(min_gap)
         self.decisions.append(decision)
+        self.speeds.append(speed)
+        self.outcomes.append(outcome)
+        self.ttr.append(ttr)
 
 
 class ClosedLoop:
@@ -251,28 +292,33 @@ class ClosedLoop:
     records kept between steps."""
 
     def __init__(self, world: World, scn: Scenario, planner: Planner, rulesets: list[RuleSet], monitor: bool,
-                 controller: str) -> None:
+                 controller: str, safety: bool = True) -> None:
         self.world, self.scn, self.planner = world, scn, planner
         self.monitor, self.controller = monitor, controller
         self.label = StepDecision(planner.label)  # the decision of its unchecked steps (no monitor)
+        self.safety = monitor and safety
         self.rulesets = rulesets
         self.rules: list[RuleCheck]
         self.rules, self.consts = rule_checks(rulesets, world.settings.dt)
         fields = VehicleParams.__dataclass_fields__
         params = VehicleParams().with_overrides({k: v for k, v in world.ego.vehicle.items() if k in fields})
         self.params = replace(params, length=world.ego.length, width=world.ego.width)
-        self.low = LowLevelController(world, self.rules, params=self.params, consts=self.consts)
+        self.ctx = context(world, self.params)
+        self.low = LowLevelController(world, self.rules, params=self.params, consts=self.consts, safety=self.ctx,
+                                      settings=LowLevelSettings.of(world.settings, safety=self.safety))
+        self.initial: Verdict | None = None
         self.stats = LoopStats()
-        self.collisions = CollisionLog(world)
+        self.collisions = CollisionLog(self.ctx)
         self.columns = RuleColumns(self.rules, self.consts, world.settings.dt, SIGNALS)
         self.goal_reached_t: float | None = None
         self.t_wall0 = time.perf_counter()
 
     @classmethod
-    def create(cls, world: World, scn: Scenario, *, monitor: bool, controller: str
+    def create(cls, world: World, scn: Scenario, *, monitor: bool, controller: str, safety: bool = True
                ) -> tuple["ClosedLoop | None", list[Diagnostic]]:
-        """The loop of ``world`` with the planner named ``controller``; None when the scenario's
-        rules or the planner's settings are unusable (the diagnostics say why)."""
+        """The loop of ``world`` with the planner named ``controller`` (``safety``: the low level's
+        safety layer); None when the scenario's rules or the planner's settings are unusable (the
+        diagnostics say why)."""
         sets, diags = load_rulesets(world)
         if any(d.is_error for d in diags):
             return None, diags
@@ -280,7 +326,7 @@ class ClosedLoop:
         diags += d
         if planner is None:
             return None, diags
-        return cls(world, scn, planner, sets, monitor, controller), diags
+        return cls(world, scn, planner, sets, monitor, controller, safety), diags
 
     # ------------------------------------------------------------------------------ the run
     def run(self, out_dir: str, progress: Callable[[StepInfo], None] | None, frames: bool,
@@ -293,7 +339,7 @@ class ClosedLoop:
         fw_writer = None
         try:
             meta = run_metadata(self.world, self.scn, monitor=self.monitor, controller=self.controller,
-                                timing_columns=TIMING_COLUMNS)
+                                timing_columns=TIMING_COLUMNS, safety=self.safety)
             with TraceWriter(out_dir, columns, meta) as writer:
                 if frames:
                     fw_writer = FrameWriter(out_dir, self.world)
@@ -319,6 +365,11 @@ class ClosedLoop:
                     status, error, unwritable = RunStatus.CRASHED, error or f"{type(exc).__name__}: {exc}", True
         summary = self._summary(out_dir, status)
         where = Span.whole_file(self.scn.path)
+        if self.initial is not None and not self.initial.verified:
+            why = "; ".join(str(r) for r in self.initial.refutations) or "no fail-safe"
+            diags.append(SIM616(f"the initial state has no verified fail-safe ({why})", where,
+                                hint="the run went on, braking unverified until a control verified; move the ego or "
+                                     "the others, or lower the initial speed"))
         if unwritable:
             diags.append(SIM615(f"cannot write the run directory {out_dir}: {error}", where,
                                 hint="free disk space or choose another --out; the steps written so far are kept"))
@@ -336,8 +387,9 @@ class ClosedLoop:
             except (OSError, ValueError) as exc:
                 diags.append(SIM615(f"cannot record the traceback in {RUN_FILE}: {exc}", where))
         for c in summary.collisions:
+            fault = "the ego's fault" if c.at_fault else "not the ego's fault"
             diags.append(SIM614(f"collision with '{c.other}' at t = {c.t:.1f} s, ({c.x:.1f}, {c.y:.1f}) m, "
-                                f"overlap {-c.gap:.2f} m", where))
+                                f"overlap {-c.gap:.2f} m: {fault} ({c.reason})", where))
         return summary, diags
 
     def _summary(self, out_dir: str, status: RunStatus) -> RunSummary:
@@ -352,7 +404,9 @@ class ClosedLoop:
             low_ms=st.low_ms, tracking=st.tracking, over_limit=st.over_limit, min_dist=st.min_dist,
             min_gap=st.min_gap, decisions=st.decisions,
             collisions=sorted(self.collisions.collisions, key=lambda c: c.t), robustness=rob,
-            closest=self.collisions.closest(5), goal_reached_t=self.goal_reached_t,
+            closest=self.collisions.closest(5), goal_reached_t=self.goal_reached_t, speeds=st.speeds,
+            verification=st.outcomes, ttr=st.ttr, safety=self.safety,
+            safe_start=None if self.initial is None else self.initial.verified,
         )
 
     def _steps(self, progress: Callable[[StepInfo], None] | None, writer: TraceWriter,
@@ -367,6 +421,9 @@ class ClosedLoop:
         out = Recorders(writer, frames, History(SIGNALS, keep))
         self.low.warm_up(x)
         rollout(x, np.zeros((1, 1, 2)), dt, p)  # compile the plant step before timing anything
+        if self.safety:
+            self.initial = self.low.start(x, state.traffic, 0.0, state.s_hint)
+            writer.meta["safety"] = {"initial": _verdict_json(self.initial)}
         recent: deque[float] = deque(maxlen=20)
         self.goal_reached_t = None
         stops_at_goal = bool(w.route.v_des.size and w.route.v_des[-1] <= 1e-9)
@@ -379,9 +436,10 @@ class ClosedLoop:
             c2 = time.perf_counter()
             applied = self.check(sensed, plan, u_star)
             c3 = time.perf_counter()
+            ttr = self.criticality(sensed, applied)
             state, plant_ms = self.advance(sensed, applied)
             times = StepTimes((c2 - c1) * 1e3, (c3 - c2) * 1e3, (c3 - c0) * 1e3, plant_ms)
-            self.record(sensed, plan, applied, times, out)
+            self.record(sensed, plan, applied, times, out, ttr)
             recent.append(times.step)
             # the run ends when the ego stands still at the goal (GOAL_ZONE before it or past it)
             if stops_at_goal and sensed.s0 >= goal_s - GOAL_ZONE and abs(sensed.v) <= s.stop_speed:
@@ -435,13 +493,31 @@ class ClosedLoop:
                                   target=plan.states, step=sensed.k, now=sensed.others)
             control, accel, decision, tried = dec.control, dec.accel, StepDecision(dec.decision), dec.candidates
             why = " ".join(dec.violated)
+            safety, verify_ms, intended = dec.safety, dec.timings_ms.get("verify", 0.0), dec.intended
         else:
             why = ""
-            control = np.array([u_star[0, 0], float(gamma_from_accel(u_star[0, 1], max(x[3], 0.0), self.params))])
+            gamma = gamma_from_accel(u_star[:, 1], max(x[3], 0.0), self.params)
+            intended = np.stack([u_star[:, 0], gamma], axis=1)
+            control = intended[0].copy()
             accel, decision, tried = float(u_star[0, 1]), self.label, 0
+            safety, verify_ms = OFF, 0.0
         if decision is StepDecision.MPC and plan.status is PlanStatus.FALLBACK:
             decision = StepDecision.FALLBACK
-        return Applied(control, float(accel), decision, tried, why)
+        return Applied(control, float(accel), decision, tried, why, safety, verify_ms, intended)
+
+    def criticality(self, sensed: Sensed, applied: Applied) -> float:
+        """The time to react [s] every :data:`TTR_EVERY` steps (NaN in between; see the module
+        docstring): how long the intended plan, its last command held to :data:`TTR_HORIZON`,
+        could still be followed with a verified fail-safe after it."""
+        if sensed.k % TTR_EVERY or applied.intended is None:
+            return math.nan
+        dt = self.world.settings.dt
+        plan = np.asarray(applied.intended, dtype=float)
+        n = max(len(plan), int(round(TTR_HORIZON / dt)))
+        plan = np.concatenate([plan, np.repeat(plan[-1:], n - len(plan), axis=0)])
+        x = sensed.ego.detailed
+        assert x is not None
+        return round(time_to_react(self.ctx, x, plan, sensed.traffic, sensed.t, sensed.s0).seconds, 9)
 
     def advance(self, sensed: Sensed, applied: Applied) -> tuple[LoopState, float]:
         """The world one period later (the ego's plant, the traffic, the sensing memory), and the
@@ -459,22 +535,27 @@ class ClosedLoop:
         return LoopState(x_next, traffic, sensed.memory_after, sensed.s0, applied.accel,
                          float(applied.control[0])), plant_ms
 
-    def record(self, sensed: Sensed, plan: PlanResult, applied: Applied, times: StepTimes, out: Recorders) -> None:
-        """The step's trace row, history sample, statistics, collisions and frame."""
+    def record(self, sensed: Sensed, plan: PlanResult, applied: Applied, times: StepTimes, out: Recorders,
+               ttr: float = math.nan) -> None:
+        """The step's trace row, history sample, statistics, collisions and frame (``ttr``: the
+        time to react [s], NaN when not computed this step)."""
         now = dict(sensed.now)
         now["a"], now["delta"] = applied.accel, float(applied.control[0])
         out.history.append(now)
         X, Y, psi, v = (float(c) for c in sensed.ego.pose)
         t = sensed.t
-        min_dist = self.collisions.observe(t, X, Y, psi, sensed.traffic)
+        min_dist = self.collisions.observe(t, X, Y, psi, v, sensed.traffic)
         row = {"t": round(t, 9), "x": X, "y": Y, "psi": psi, "v": v, "delta": float(applied.control[0]),
                "gamma": float(applied.control[1]), "decision": applied.decision, "t_high_ms": times.high,
                "t_low_ms": times.low, "t_step_ms": times.step, "n_near": now["n_near"], "min_dist": min_dist,
                "min_gap": now["min_gap"], "tracking_error": abs(now["e"]), "v_max": now["v_max"],
                "light_state": self._light_state(t, now), "candidates": applied.candidates,
-               "ll_violated": applied.violated, "hl_status": plan.status.value, "hl_qps": plan.qps}
+               "ll_violated": applied.violated, "hl_status": plan.status.value, "hl_qps": plan.qps,
+               "verification": applied.safety.outcome.value, "failsafe": applied.safety.failsafe,
+               "refuted": applied.safety.refuted, "ttr_s": ttr, "t_verify_ms": applied.verify_ms}
         row.update({c: now[c] for c in SIGNAL_COLUMNS})
-        self.stats.add(times, abs(now["e"]), v - now["v_max"], min_dist, now["min_gap"], applied.decision)
+        self.stats.add(times, abs(now["e"]), v - now["v_max"], min_dist, now["min_gap"], applied.decision, v,
+                       applied.safety.outcome.value, ttr)
         if out.frames is not None:
             out.frames.write(t, (X, Y, psi), np.asarray(plan.states), sensed.traffic)
         row["t_plant_ms"] = times.plant
@@ -486,3 +567,9 @@ class ClosedLoop:
             return "none"
         j = int(np.argmin(np.abs(w.route_lights - now["s"] - now["d_light"])))
         return _LIGHT_NAMES.get(int(w.lights.state_at(t)[w.route_light_index[j]]), "none")
+
+
+def _verdict_json(v: Verdict) -> dict[str, object]:
+    """A verdict for ``run.json``: verified, the fail-safe kept, each refutation."""
+    return {"verified": v.verified, "failsafe": v.failsafe.name if v.failsafe is not None else None,
+            "refutations": [str(r) for r in v.refutations], "horizon_s": v.horizon, "participants": v.participants}

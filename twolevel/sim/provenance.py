@@ -10,6 +10,7 @@ from importlib import metadata
 from typing import Any, Sequence
 
 from twolevel.sim.frames import map_lines
+from twolevel.sim.summary import jsonable
 from twolevel.world.loader import Scenario
 from twolevel.world.world import World
 
@@ -44,10 +45,11 @@ def cpus() -> int:
         return os.cpu_count() or 1
 
 
-def run_metadata(world: World, scn: Scenario, *, monitor: bool, controller: str, timing_columns: Sequence[str]
-                 ) -> dict[str, Any]:
+def run_metadata(world: World, scn: Scenario, *, monitor: bool, controller: str, timing_columns: Sequence[str],
+                 safety: bool = True) -> dict[str, Any]:
     """The provenance part of ``run.json`` for a run of ``scn`` (its ``world``) with ``controller``;
-    ``timing_columns``: the trace's wall-clock columns."""
+    ``timing_columns``: the trace's wall-clock columns; ``safety``: the low level's safety layer
+    was on (with the assumptions about others it rests on)."""
     s = world.settings
     return {
         "scenario": {"name": world.name, "path": scn.path, "sha256": sha256_of(scn.path)},
@@ -56,7 +58,8 @@ def run_metadata(world: World, scn: Scenario, *, monitor: bool, controller: str,
         "settings": {"H": s.H, "dt": s.dt, "r_near": s.r_near, "r": s.r, "D_safe": s.D_safe, "samples": s.samples,
                      "time_limit": s.time_limit, "solver": s.solver, "stop_speed": s.stop_speed,
                      "duration": s.duration, "seed": s.seed, "monitor": monitor,
-                     "controller": controller, "vehicle": dict(world.ego.vehicle)},
+                     "controller": controller, "vehicle": dict(world.ego.vehicle), "safety": safety,
+                     "assumptions": jsonable(world.assumptions)},
         "seed": s.seed,
         "versions": versions(),
         "machine": {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),

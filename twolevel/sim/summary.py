@@ -16,7 +16,7 @@ from twolevel.milp.solution import ValueEnum
 from twolevel.sim.trace import RunStatus
 
 __all__ = ["StepDecision", "LEVELS", "LEVEL", "StepInfo", "Collision", "Closest", "RuleViolations", "RunSummary",
-           "summarise", "jsonable", "intervals"]
+           "summarise", "jsonable", "intervals", "HARD_BRAKING"]
 
 class StepDecision(ValueEnum):
     """The trace's ``decision``: whose control a step applied. With the monitor, the low level's
@@ -29,22 +29,29 @@ class StepDecision(ValueEnum):
     LEAST_VIOLATION = "least_violation"
     BRAKE = "brake"
     FALLBACK = "fallback"
+    FAILSAFE = "failsafe"
     NMPC = "nmpc"
+    RECKLESS = "reckless"
 
     @property
     def level(self) -> str:
-        """Which part of the controller chose the control: ``high``, ``low`` or ``nmpc``."""
+        """Which part of the controller chose the control: ``high``, ``low``, ``safety`` (the
+        fail-safe verified earlier) or ``nmpc``."""
         return _LEVEL_OF[self]
 
 
 _LEVEL_OF = {StepDecision.MPC: "high", StepDecision.FALLBACK: "high", StepDecision.SAMPLED: "low",
-             StepDecision.BRAKE: "low", StepDecision.LEAST_VIOLATION: "low", StepDecision.NMPC: "nmpc"}
+             StepDecision.BRAKE: "low", StepDecision.LEAST_VIOLATION: "low", StepDecision.FAILSAFE: "safety",
+             StepDecision.NMPC: "nmpc", StepDecision.RECKLESS: "high"}
 
-LEVELS: tuple[str, ...] = ("high", "low", "nmpc")
+LEVELS: tuple[str, ...] = ("high", "low", "safety", "nmpc")
 """The levels, in the order the report lists them."""
 
 LEVEL: Mapping[str, str] = {d.value: d.level for d in StepDecision}
 """Decision → level, by the decision's text (as the report reads it from a trace)."""
+HARD_BRAKING = 4.0
+"""[m/s²] Braking harder than this counts as hard (RSS's brake_min: what a follower may expect;
+the gentlest fail-safe brakes at it)."""
 
 
 @dataclass(frozen=True)
@@ -68,7 +75,10 @@ class StepInfo:
 @dataclass(frozen=True)
 class Collision:
     """An overlap of the ego's and another vehicle's boxes: from ``t`` to ``t_end`` [s], where
-    it began (``x``, ``y`` [m]), the other vehicle's id, and the deepest overlap ``gap`` [m] (< 0)."""
+    it began (``x``, ``y`` [m]), the other vehicle's id, the deepest overlap ``gap`` [m] (< 0),
+    and who is responsible (:mod:`twolevel.sim.collisions`): ``at_fault`` (the ego's fault;
+    None: not classified), the ``verdict`` (ego_at_fault, ego_standing, hit_from_behind,
+    other_broke_assumptions) and the ``reason`` in a sentence."""
 
     t: float
     t_end: float
@@ -76,6 +86,9 @@ class Collision:
     y: float
     other: str
     gap: float
+    at_fault: bool | None = None
+    verdict: str = ""
+    reason: str = ""
 
 
 @dataclass(frozen=True)
@@ -109,7 +122,13 @@ class RunSummary:
     whole loop. Tracking error [m] = |lateral offset| from the route. ``min_distance`` [m]: the
     smallest centre-to-centre distance to any other vehicle (the paper's measure);
     ``min_gap`` [m]: the smallest box separation (< 0: overlap); ``closest``: the five vehicles
-    that came closest (centre to centre), nearest first."""
+    that came closest (centre to centre), nearest first. The safety layer (``safety``: it was
+    on): ``safe_start`` (the
+    initial state had a fail-safe; None: the layer was off), ``verification``: steps per
+    outcome (verified, failsafe, unverified, off), ``at_fault``: collisions that were the ego's
+    fault, ``ttr_min_s`` [s]: the smallest time to react recorded. Braking: ``decel_peak``
+    [m/s²]: the largest deceleration over one step (from the speeds), ``hard_braking_share``:
+    the share of steps decelerating harder than :data:`HARD_BRAKING`."""
 
     scenario: str
     run_dir: str
@@ -142,6 +161,13 @@ class RunSummary:
     decisions: Mapping[str, int] = field(default_factory=dict)
     decisions_by_level: Mapping[str, int] = field(default_factory=dict)
     goal_reached_t: float | None = None  # [s] when the ego stood still at the goal (the run ends there)
+    safety: bool = False
+    safe_start: bool | None = None
+    verification: Mapping[str, int] = field(default_factory=dict)
+    at_fault: int = 0
+    ttr_min_s: float = math.nan
+    decel_peak: float = math.nan
+    hard_braking_share: float = math.nan
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready dict (infinities as the strings "inf"/"-inf", NaN as null)."""
@@ -190,8 +216,11 @@ def summarise(
     tracking: Sequence[float], over_limit: Sequence[float], min_dist: Sequence[float], min_gap: Sequence[float],
     decisions: Sequence[StepDecision], collisions: Sequence[Collision], robustness: Mapping[str, np.ndarray],
     closest: Sequence[Closest] = (), budget_ms: float = 100.0, goal_reached_t: float | None = None,
+    speeds: Sequence[float] = (), verification: Sequence[str] = (), safety: bool = False,
+    safe_start: bool | None = None, ttr: Sequence[float] = (),
 ) -> RunSummary:
-    """The summary of the steps recorded so far."""
+    """The summary of the steps recorded so far (``speeds`` [m/s] per step, ``verification``
+    outcome per step, ``ttr`` [s] the time to react where recorded, NaN elsewhere)."""
     st, hi, lo = (np.asarray(a, dtype=float) for a in (step_ms, high_ms, low_ms))
     n = int(st.size)
     tr = np.asarray(tracking, dtype=float)
@@ -208,6 +237,13 @@ def summarise(
         viol.append(RuleViolations(rule, int(bad.size), float(bad[0] * dt) if bad.size else None,
                                    float(rob.min()) if rob.size else math.nan))
     total = float(st.sum())
+    v = np.asarray(speeds, dtype=float)
+    decel = -np.diff(v) / dt if v.size > 1 else np.zeros(0)
+    outcomes: dict[str, int] = {}
+    for o in verification:
+        outcomes[o] = outcomes.get(o, 0) + 1
+    ttr_a = np.asarray(ttr, dtype=float)
+    ttr_a = ttr_a[np.isfinite(ttr_a)]
     return RunSummary(
         scenario=scenario, run_dir=run_dir, status=status, monitor=monitor, controller=controller, seed=seed,
         duration=round(n * dt, 9), steps=n, wall_time_s=round(wall_time_s, 3),
@@ -224,5 +260,10 @@ def summarise(
         min_distance=float(np.min(min_dist)) if len(min_dist) else math.inf,
         min_gap=float(np.min(min_gap)) if len(min_gap) else math.inf,
         collisions=tuple(collisions), violations=tuple(viol), closest=tuple(closest), decisions=counts, decisions_by_level=levels,
-        goal_reached_t=goal_reached_t,
+        goal_reached_t=goal_reached_t, safety=safety, safe_start=safe_start,
+        verification=outcomes,
+        at_fault=sum(1 for c in collisions if c.at_fault),
+        ttr_min_s=float(ttr_a.min()) if ttr_a.size else math.nan,
+        decel_peak=float(max(decel.max(), 0.0)) if decel.size else math.nan,
+        hard_braking_share=float(np.mean(decel > HARD_BRAKING)) if decel.size else math.nan,
     )

@@ -48,7 +48,7 @@ BASE_COLUMNS: tuple[str, ...] = (
     "light_state",
 )
 
-TEXT_COLUMNS = frozenset({"decision", "light_state"})
+TEXT_COLUMNS = frozenset({"decision", "light_state", "verification", "failsafe", "refuted"})
 
 #: Files a report writes into a run directory: a new run in the same directory removes them, so
 #: a report of the previous run never stands beside the new trace.
