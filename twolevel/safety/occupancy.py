@@ -54,7 +54,7 @@ from twolevel.safety.network import CELL_LENGTH, CELL_TURN, LIGHT, STOP_SIGN, Ne
 from twolevel.safety.polygons import OCTAGON_NORMALS, band_pieces, disc_hull_octagons, lane_point
 from twolevel.world.traffic import RED, TrafficState
 
-__all__ = ["Intervals", "Occupancy", "predict", "travel_max", "travel_min", "time_to_travel", "STOP_ZONE",
+__all__ = ["Intervals", "Occupancy", "predict", "travel_max", "travel_min", "time_to_travel", "lane_of", "STOP_ZONE",
            "STANDING"]
 
 STOP_ZONE = 3.0
@@ -193,7 +193,7 @@ def _wait_not_red(net: Network, light: np.ndarray, t_abs: np.ndarray) -> np.ndar
 # ---------------------------------------------------------------------------- prediction
 
 
-def _lane_of(net: Network, traffic: TrafficState, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def lane_of(net: Network, traffic: TrafficState, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Lane and s [m] of participants ``idx``: the simulator's lane where it tracks one, else
     the lane the pose lies on (heading within 90°), else −1."""
     lane = traffic.lane[idx].astype(int)
@@ -296,7 +296,7 @@ def predict(net: Network, traffic: TrafficState, t: float, intervals: Intervals,
     changes = col[:, 5] > 0
     v0 = np.maximum(traffic.v[idx].astype(float), 0.0)
 
-    lane, s0 = _lane_of(net, traffic, idx)
+    lane, s0 = lane_of(net, traffic, idx)
     on_lane = (col[:, 4] > 0) & (lane >= 0)
     li = np.maximum(lane, 0)
     per_tree = lambda name: np.where(changes, getattr(net.change, name)[li], getattr(net.keep, name)[li])  # noqa: E731
@@ -325,11 +325,11 @@ def predict(net: Network, traffic: TrafficState, t: float, intervals: Intervals,
     parts = [p for p in parts if p is not None]
     if not parts:
         return _empty(intervals, idx, P, J)
-    points, axes, centre, radius, extent, interval, owner, lane_of, changed = (
+    points, axes, centre, radius, extent, interval, owner, piece_lane, changed = (
         np.concatenate([p[i] for p in parts]) for i in range(9))
     fh = np.where(on_lane[:, None], front_hi, np.nan)
     rl = np.where(on_lane[:, None], rear_lo, np.nan)
-    return Occupancy(intervals, points, axes, centre, radius, extent, interval, owner, lane_of, changed, idx, ~on_lane,
+    return Occupancy(intervals, points, axes, centre, radius, extent, interval, owner, piece_lane, changed, idx, ~on_lane,
                      fh, rl)
 
 

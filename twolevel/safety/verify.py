@@ -27,8 +27,9 @@ lane at standstill) that refuted it.
 
 **What is left to others, by assumption** (each a documented responsibility, not a check):
 
-* **followers**: a participant behind the ego on the ego's lane (along its lane successors) keeps
-  a safe distance (RSS); while the ego's body is within its route lane (± ``lane_tolerance``) its
+* **followers**: a lane-bound participant (a vehicle or cyclist) behind the ego on the ego's lane
+  (along its lane successors; the lane the simulator tracks it on, or the one its pose lies on)
+  keeps a safe distance (RSS); while the ego's body is within its route lane (± ``lane_tolerance``) its
   occupancy is not checked. When the ego leaves its lane (the high level may use the adjacent
   lanes) followers are checked like everyone else;
 * **cut-ins**: a participant changing into the ego's lane leaves the ego RSS's distance; while
@@ -61,7 +62,7 @@ from twolevel.models.rollout import Backend, rollout
 from twolevel.world.assumptions import kinds_of
 from twolevel.safety.failsafe import FailSafe, FailSafeSettings, brake_rate, manoeuvres, roll
 from twolevel.safety.network import Network, network_of
-from twolevel.safety.occupancy import Intervals, Occupancy, predict
+from twolevel.safety.occupancy import Intervals, Occupancy, lane_of, predict
 from twolevel.world.traffic import TrafficState
 from twolevel.world.world import World
 
@@ -213,8 +214,10 @@ def _excluded(ctx: Context, traffic: TrafficState, s_ego: float, e_ego: float) -
     protected = frozenset(int(pc[0]) for pc in pieces[j:])
     # followers: on a lane whose own lane tree reaches the ego's lane with the ego ahead of them
     tr = ctx.network.keep
-    lane = traffic.lane.astype(int)
-    on = traffic.active & (lane >= 0)
+    # the simulator's lane, or the one the pose lies on (scripted participants); lane-bound users only
+    lane, s_on = lane_of(ctx.network, traffic, np.arange(n))
+    bound = np.array([w.assumptions.bounds(int(k)).lane_bound for k in ctx.kinds], dtype=bool).reshape(n)
+    on = traffic.active & (lane >= 0) & bound
     follower = np.zeros(n, dtype=bool)
     idx = np.flatnonzero(on)
     if len(idx):
@@ -224,7 +227,7 @@ def _excluded(ctx: Context, traffic: TrafficState, s_ego: float, e_ego: float) -
         node = np.repeat(start_n, count) + np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
         hit = tr.ref[node] == lane_e
         x_ego_rear = tr.offset[node] + s_lane - w.ego.length / 2
-        front = traffic.s[idx][owner] + w.parts.length[idx][owner] / 2
+        front = s_on[idx][owner] + w.parts.length[idx][owner] / 2
         behind = hit & (front <= x_ego_rear)
         follower[idx[np.unique(owner[behind])]] = True
     return follower, protected
