@@ -282,6 +282,7 @@ def _summary_rows(s) -> list[tuple[str, str]]:  # noqa: ANN001 - RunSummary, imp
         ("goal reached at", "-" if s.goal_reached_t is None else f(s.goal_reached_t, "s", 4)),
         ("steps", str(s.steps)),
         ("control step median / p95 / max", f"{s.step_ms_median:.2f} / {s.step_ms_p95:.2f} / {s.step_ms_max:.2f} ms"),
+        ("its CPU time median / p99 / max", f"{s.step_cpu_ms_median:.2f} / {s.step_cpu_ms_p99:.2f} / {s.step_cpu_ms_max:.2f} ms"),
         ("high level median / max", f"{s.high_ms_median:.2f} / {s.high_ms_max:.2f} ms"),
         ("low level median / max", f"{s.low_ms_median:.2f} / {s.low_ms_max:.2f} ms"),
         ("control rate", f(s.control_rate_hz, "Hz", 4)),

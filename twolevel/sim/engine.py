@@ -44,7 +44,7 @@ the rules read (a, s, e, d_stop, light_red, d_light, d_lead, v_lead; v, v_max, m
 n_near are base columns), a few controller columns (``candidates``; ``ll_violated``: the rules u*
 broke on the detailed prediction, i.e. why the low level intervened; ``hl_status``, ``hl_qps``,
 ``t_plant_ms``; the safety layer's ``verification``, ``failsafe``, ``refuted``, ``ttr_s``,
-``t_verify_ms``), then ``rob_<rule>`` per rule: the robustness at that step on the *executed*
+``t_verify_ms``; ``t_step_cpu_ms``: the control step's CPU time), then ``rob_<rule>`` per rule: the robustness at that step on the *executed*
 trajectory, by the online monitor — exactly what ``twolevel monitor rules.stl trace.csv``
 computes from the same file. A rule whose window looks ahead L steps is final L steps later, so
 rows are written with that delay; when the run ends, is interrupted (Ctrl-C) or crashes, the
@@ -56,7 +56,7 @@ stands still (speed ≤ the scenario's stop_speed) within :data:`GOAL_ZONE` of t
 the summary (and ``run.json``) records that time as ``goal_reached_t`` [s] (None otherwise).
 
 **Determinism.** Everything but the timing columns (``t_high_ms``, ``t_low_ms``, ``t_step_ms``,
-``t_plant_ms``, ``t_verify_ms``) is a function of the scenario and the seed, provided the high level is
+``t_plant_ms``, ``t_verify_ms``, ``t_step_cpu_ms``) is a function of the scenario and the seed, provided the high level is
 (its time limit can make a plan depend on the machine's speed; the default mode search is
 deterministic in practice).
 """
@@ -106,13 +106,13 @@ __all__ = ["simulate_scenario", "ClosedLoop", "StepInfo", "RunSummary", "Collisi
 
 GOAL_ZONE = 1.0
 """[m] How far before the goal a standstill counts as arrived."""
-TIMING_COLUMNS = ("t_high_ms", "t_low_ms", "t_step_ms", "t_plant_ms", "t_verify_ms")
+TIMING_COLUMNS = ("t_high_ms", "t_low_ms", "t_step_ms", "t_plant_ms", "t_verify_ms", "t_step_cpu_ms")
 """Wall-clock columns (excluded from determinism comparisons)."""
 SIGNAL_COLUMNS = tuple(name for name in SIGNALS if name not in BASE_COLUMNS)
 """Signal columns beyond the base ones, named as the rules read them (a, s, e, d_stop, light_red,
 d_light, d_lead, v_lead)."""
 EXTRA_COLUMNS = ("candidates", "ll_violated", "hl_status", "hl_qps", "t_plant_ms", "verification", "failsafe",
-                 "refuted", "ttr_s", "t_verify_ms")
+                 "refuted", "ttr_s", "t_verify_ms", "t_step_cpu_ms")
 TTR_EVERY = 5
 """The time to react is computed every this many steps (see the module docstring)."""
 TTR_HORIZON = 3.0
@@ -228,12 +228,15 @@ class Applied:
 
 @dataclass(frozen=True)
 class StepTimes:
-    """Wall times of one step [ms]: the high level, the low level, both with sensing, the plant."""
+    """Wall times of one step [ms]: the high level, the low level, both with sensing, the plant;
+    and the CPU time of the process over both levels with sensing (``cpu``, what the step costs
+    when other jobs share the cores)."""
 
     high: float
     low: float
     step: float
     plant: float
+    cpu: float = math.nan
 
 
 @dataclass(frozen=True, eq=False)
@@ -251,6 +254,8 @@ class LoopStats:
     """Per-step figures the run summary is computed from."""
 
     step_ms: list[float] = field(default_factory=list)
+    cpu_ms: list[float] = field(default_factory=list)
+    """The control step's CPU time [ms]."""
     high_ms: list[float] = field(default_factory=list)
     low_ms: list[float] = field(default_factory=list)
     tracking: list[float] = field(default_factory=list)
@@ -275,6 +280,7 @@ class LoopStats:
     def add(self, times: StepTimes, tracking: float, over_limit: float, min_dist: float, min_gap: float,
             decision: StepDecision, speed: float, outcome: str, ttr: float) -> None:
         self.step_ms.append(times.step)
+        self.cpu_ms.append(times.cpu)
         self.high_ms.append(times.high)
         self.low_ms.append(times.low)
         self.tracking.append(tracking)
@@ -405,7 +411,7 @@ class ClosedLoop:
             min_gap=st.min_gap, decisions=st.decisions,
             collisions=sorted(self.collisions.collisions, key=lambda c: c.t), robustness=rob,
             closest=self.collisions.closest(5), goal_reached_t=self.goal_reached_t, speeds=st.speeds,
-            verification=st.outcomes, ttr=st.ttr, safety=self.safety,
+            verification=st.outcomes, ttr=st.ttr, safety=self.safety, cpu_ms=st.cpu_ms,
             safe_start=None if self.initial is None else self.initial.verified,
         )
 
@@ -429,16 +435,16 @@ class ClosedLoop:
         stops_at_goal = bool(w.route.v_des.size and w.route.v_des[-1] <= 1e-9)
         goal_s = float(w.route.s[-1])
         for k in range(steps):
-            c0 = time.perf_counter()
+            c0, cpu0 = time.perf_counter(), time.process_time()
             sensed = self.sense(k, state, out.history)
             c1 = time.perf_counter()
             plan, u_star = self.plan(sensed)
             c2 = time.perf_counter()
             applied = self.check(sensed, plan, u_star)
-            c3 = time.perf_counter()
+            c3, cpu3 = time.perf_counter(), time.process_time()
             ttr = self.criticality(sensed, applied)
             state, plant_ms = self.advance(sensed, applied)
-            times = StepTimes((c2 - c1) * 1e3, (c3 - c2) * 1e3, (c3 - c0) * 1e3, plant_ms)
+            times = StepTimes((c2 - c1) * 1e3, (c3 - c2) * 1e3, (c3 - c0) * 1e3, plant_ms, (cpu3 - cpu0) * 1e3)
             self.record(sensed, plan, applied, times, out, ttr)
             recent.append(times.step)
             # the run ends when the ego stands still at the goal (GOAL_ZONE before it or past it)
@@ -552,7 +558,8 @@ class ClosedLoop:
                "light_state": self._light_state(t, now), "candidates": applied.candidates,
                "ll_violated": applied.violated, "hl_status": plan.status.value, "hl_qps": plan.qps,
                "verification": applied.safety.outcome.value, "failsafe": applied.safety.failsafe,
-               "refuted": applied.safety.refuted, "ttr_s": ttr, "t_verify_ms": applied.verify_ms}
+               "refuted": applied.safety.refuted, "ttr_s": ttr, "t_verify_ms": applied.verify_ms,
+               "t_step_cpu_ms": times.cpu}
         row.update({c: now[c] for c in SIGNAL_COLUMNS})
         self.stats.add(times, abs(now["e"]), v - now["v_max"], min_dist, now["min_gap"], applied.decision, v,
                        applied.safety.outcome.value, ttr)

@@ -117,7 +117,9 @@ class RunSummary:
     """The closing summary of a run (see :func:`twolevel.sim.engine.simulate_scenario`).
 
     Control-step times [ms] cover both controller levels and the sensing they need (not the
-    plant or traffic simulation): median / p95 / p99 / max, and per level. ``control_rate_hz``
+    plant or traffic simulation): median / p95 / p99 / max, and per level, wall clock; the same
+    step's CPU time of the process (``step_cpu_ms_*``) is what it costs when other jobs share
+    the cores. ``control_rate_hz``
     = steps per second of controller time; ``realtime`` = simulated time / wall time of the
     whole loop. Tracking error [m] = |lateral offset| from the route. ``min_distance`` [m]: the
     smallest centre-to-centre distance to any other vehicle (the paper's measure);
@@ -161,6 +163,9 @@ class RunSummary:
     decisions: Mapping[str, int] = field(default_factory=dict)
     decisions_by_level: Mapping[str, int] = field(default_factory=dict)
     goal_reached_t: float | None = None  # [s] when the ego stood still at the goal (the run ends there)
+    step_cpu_ms_median: float = math.nan
+    step_cpu_ms_p99: float = math.nan
+    step_cpu_ms_max: float = math.nan
     safety: bool = False
     safe_start: bool | None = None
     verification: Mapping[str, int] = field(default_factory=dict)
@@ -217,7 +222,7 @@ def summarise(
     decisions: Sequence[StepDecision], collisions: Sequence[Collision], robustness: Mapping[str, np.ndarray],
     closest: Sequence[Closest] = (), budget_ms: float = 100.0, goal_reached_t: float | None = None,
     speeds: Sequence[float] = (), verification: Sequence[str] = (), safety: bool = False,
-    safe_start: bool | None = None, ttr: Sequence[float] = (),
+    safe_start: bool | None = None, ttr: Sequence[float] = (), cpu_ms: Sequence[float] = (),
 ) -> RunSummary:
     """The summary of the steps recorded so far (``speeds`` [m/s] per step, ``verification``
     outcome per step, ``ttr`` [s] the time to react where recorded, NaN elsewhere)."""
@@ -244,6 +249,7 @@ def summarise(
         outcomes[o] = outcomes.get(o, 0) + 1
     ttr_a = np.asarray(ttr, dtype=float)
     ttr_a = ttr_a[np.isfinite(ttr_a)]
+    cpu = np.asarray(cpu_ms, dtype=float)
     return RunSummary(
         scenario=scenario, run_dir=run_dir, status=status, monitor=monitor, controller=controller, seed=seed,
         duration=round(n * dt, 9), steps=n, wall_time_s=round(wall_time_s, 3),
@@ -260,7 +266,8 @@ def summarise(
         min_distance=float(np.min(min_dist)) if len(min_dist) else math.inf,
         min_gap=float(np.min(min_gap)) if len(min_gap) else math.inf,
         collisions=tuple(collisions), violations=tuple(viol), closest=tuple(closest), decisions=counts, decisions_by_level=levels,
-        goal_reached_t=goal_reached_t, safety=safety, safe_start=safe_start,
+        goal_reached_t=goal_reached_t, step_cpu_ms_median=_pct(cpu, 50), step_cpu_ms_p99=_pct(cpu, 99),
+        step_cpu_ms_max=float(cpu.max()) if cpu.size else math.nan, safety=safety, safe_start=safe_start,
         verification=outcomes,
         at_fault=sum(1 for c in collisions if c.at_fault),
         ttr_min_s=float(ttr_a.min()) if ttr_a.size else math.nan,
