@@ -8,7 +8,7 @@ import pytest
 
 from helpers.safety_worlds import place, world
 from twolevel.safety.responsibility import (
-    EGO_AT_FAULT, EGO_STANDING, HIT_FROM_BEHIND, OTHER_BROKE_ASSUMPTIONS, classify, stayed_within,
+    CUT_IN, EGO_AT_FAULT, EGO_STANDING, HIT_FROM_BEHIND, OTHER_BROKE_ASSUMPTIONS, classify, stayed_within,
 )
 from twolevel.safety.verify import context
 
@@ -35,6 +35,38 @@ def test_a_standing_ego_is_not_at_fault():
     r = classify(times(), ego, other, BOX, BOX)
     assert r.verdict == EGO_STANDING and not r.at_fault
     assert r.ego_speed == 0.0 and 2.4 < r.t < 2.7
+
+
+def test_standing_inside_another_lane_is_no_excuse():
+    """Stopped inside a crossing lane and hit by a car that kept the assumptions: the ego's fault
+    (the paper's low level stops there; the verifier never does)."""
+    ego = straight(0.0, 0.0)
+    other = np.stack([np.full(40, 0.0), -30.0 + 12.0 * times(), np.full(40, np.pi / 2), np.full(40, 12.0)], axis=1)
+    r = classify(times(), ego, other, BOX, BOX, standing_in="north")
+    assert r.verdict == EGO_AT_FAULT and r.at_fault and "inside lane 'north'" in r.reason
+    assert classify(times(), ego, other, BOX, BOX).verdict == EGO_STANDING
+
+
+@pytest.mark.parametrize("ahead, fault", [(6.0, False), (40.0, True)])
+def test_a_cut_in_closer_than_the_safe_distance_is_the_cutters_fault(ahead, fault):
+    """A car changes into the ego's lane ``ahead`` [m] (centres) in front of it at 1 s and stops
+    at 8 m/s²; the ego at 15 m/s runs into it. From 6 m (a 1.8 m gap, far below the safe
+    distance) it is the car's doing; from 40 m the ego had room to stop: its fault."""
+    n = 60
+    ego = straight(0.0, 15.0, n=n)
+    other = straight(ahead + 15.0 * 1.0, 15.0, n=n)
+    t = times(n)
+    stop = t >= 1.0  # brakes from 1 s, when it enters the lane
+    tb = np.maximum(t - 1.0, 0.0)
+    tt = np.minimum(tb, 15.0 / 8.0)
+    other[:, 0] = ahead + 15.0 * np.minimum(t, 1.0) + np.where(stop, 15.0 * tt - 4.0 * tt**2, 0.0)
+    other[:, 3] = np.where(stop, np.maximum(15.0 - 8.0 * tb, 0.0), 15.0)
+    ego_lane = np.zeros(n, dtype=int)
+    other_lane = np.where(t < 1.0, 1, 0)
+    r = classify(t, ego, other, BOX, BOX, ego_lane=ego_lane, other_lane=other_lane)
+    assert r.verdict == (EGO_AT_FAULT if fault else CUT_IN) and r.at_fault is fault
+    if not fault:
+        assert "changed into the ego's lane at 1.0 s" in r.reason
 
 
 def test_hit_from_behind_on_its_lane():

@@ -11,7 +11,7 @@ the run (the ego's poses and speeds, the lane it was on, the traffic states) by
 :func:`twolevel.safety.responsibility.classify`: whether the other stayed inside the occupancy
 predicted for it under the scenario's assumptions (:func:`~twolevel.safety.responsibility.stayed_within`),
 whether the ego was standing outside every other lane
-(:func:`~twolevel.safety.verify.standstill_lane`), whether it was hit from behind. The episode's
+(:func:`~twolevel.safety.verify.standstill_lane`), whether it was hit from behind or cut in on. The episode's
 :class:`~twolevel.sim.summary.Collision` records ``at_fault``, the ``verdict`` and the ``reason``.
 Classification runs in every run, the safety layer on or off.
 """
@@ -111,7 +111,8 @@ class CollisionLog:
         return classify(t, ego, other, (w.ego.length, w.ego.width), (float(w.parts.length[i]), float(w.parts.width[i])),
                         other_inside=inside, ego_lane=ego_lane, other_lane=other_lane,
                         stop_speed=w.settings.stop_speed, response_time=w.assumptions.response.time,
-                        standing_in=None if lane is None else w.lanes.lanes[lane].id)
+                        standing_in=None if lane is None else w.lanes.lanes[lane].id,
+                        brake_min=w.assumptions.response.brake_min, brake_max=w.assumptions.response.brake_max)
 
     def close(self, t: float, keep: set[int] | None = None) -> None:
         """Record every open episode except those of the vehicles in ``keep`` as ended."""

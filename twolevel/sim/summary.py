@@ -77,7 +77,7 @@ class Collision:
     """An overlap of the ego's and another vehicle's boxes: from ``t`` to ``t_end`` [s], where
     it began (``x``, ``y`` [m]), the other vehicle's id, the deepest overlap ``gap`` [m] (< 0),
     and who is responsible (:mod:`twolevel.sim.collisions`): ``at_fault`` (the ego's fault;
-    None: not classified), the ``verdict`` (ego_at_fault, ego_standing, hit_from_behind,
+    None: not classified), the ``verdict`` (ego_at_fault, ego_standing, hit_from_behind, cut_in,
     other_broke_assumptions) and the ``reason`` in a sentence."""
 
     t: float
