@@ -49,7 +49,7 @@ invariably safe states).
     context(world, params=None, settings=None) -> Context                      # verify.py
     verify_step(ctx, x0, control, traffic, t, s_hint=None) -> Verdict
     verify_initial_state(ctx, x0, traffic, t=0.0, s_hint=None) -> Verdict
-    time_to_react(ctx, x0, plan, traffic, t, s_hint=None) -> TimeToReact
+    time_to_react(ctx, x0, plan, traffic, t, s_hint=None, known=-1) -> TimeToReact
     predict(net, traffic, t, intervals, assumptions, kinds, include=None, roi=None) -> Occupancy  # occupancy.py
     network_of(world) -> Network                                                # network.py
     roll(x0, plan, route, s0, dt, params, settings=FailSafeSettings(), backend="auto") -> list[FailSafe]  # failsafe.py

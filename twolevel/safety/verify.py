@@ -472,11 +472,13 @@ def verify_initial_state(ctx: Context, x0: np.ndarray, traffic: TrafficState, t:
 
 
 def time_to_react(ctx: Context, x0: np.ndarray, plan: np.ndarray, traffic: TrafficState, t: float,
-                  s_hint: float | None = None) -> TimeToReact:
+                  s_hint: float | None = None, known: int = -1) -> TimeToReact:
     """How many steps of the intended ``plan`` (H, 2) [δ rad, γ] from ``x0`` could be followed with
     a verified fail-safe after each: the largest k such that the fail-safe after k steps verifies,
     found by bisection from k = H down (assuming that once no fail-safe verifies after k steps,
-    none does after more: the others' sets only grow)."""
+    none does after more: the others' sets only grow). ``known``: a number of steps already known
+    to be followable (1 when the plan's first step was just verified; −1: nothing known), which
+    spares those checks."""
     dt = ctx.world.settings.dt
     plan = np.asarray(plan, dtype=float).reshape(-1, 2)
     H = len(plan)
@@ -490,9 +492,9 @@ def time_to_react(ctx: Context, x0: np.ndarray, plan: np.ndarray, traffic: Traff
 
     if ok(H):
         return TimeToReact(H, H * dt, True)
-    if not ok(0):
+    if known < 0 and not ok(0):
         return TimeToReact(-1, -dt, False)
-    lo, hi = 0, H  # ok(lo), not ok(hi)
+    lo, hi = max(known, 0), H  # ok(lo), not ok(hi)
     while hi - lo > 1:
         mid = (lo + hi) // 2
         if ok(mid):

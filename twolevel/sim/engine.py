@@ -75,7 +75,7 @@ from typing import Callable
 import numpy as np
 
 from twolevel.control.low_level.controller import LowLevelController
-from twolevel.control.low_level.guard import OFF, Check
+from twolevel.control.low_level.guard import OFF, Check, Outcome
 from twolevel.control.low_level.settings import LowLevelSettings
 from twolevel.control.low_level.rules import RuleCheck, rule_checks
 from twolevel.control.planner import EgoState, Planner, PlanResult, PlanStatus, Snapshot
@@ -518,12 +518,16 @@ class ClosedLoop:
         if sensed.k % TTR_EVERY or applied.intended is None:
             return math.nan
         dt = self.world.settings.dt
+        first = applied.safety.plan_first
+        if first is False and applied.safety.outcome is Outcome.FAILSAFE:  # u*_0 did not verify, a fail-safe did
+            return 0.0
         plan = np.asarray(applied.intended, dtype=float)
         n = max(len(plan), int(round(TTR_HORIZON / dt)))
         plan = np.concatenate([plan, np.repeat(plan[-1:], n - len(plan), axis=0)])
         x = sensed.ego.detailed
         assert x is not None
-        return round(time_to_react(self.ctx, x, plan, sensed.traffic, sensed.t, sensed.s0).seconds, 9)
+        known = 1 if first else -1  # its first step verified: one step is followable
+        return round(time_to_react(self.ctx, x, plan, sensed.traffic, sensed.t, sensed.s0, known).seconds, 9)
 
     def advance(self, sensed: Sensed, applied: Applied) -> tuple[LoopState, float]:
         """The world one period later (the ego's plant, the traffic, the sensing memory), and the

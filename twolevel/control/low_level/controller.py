@@ -29,6 +29,7 @@ level judges them are :class:`~twolevel.control.low_level.rules.RuleCheck` s.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -117,9 +118,9 @@ class LowLevelController:
         guard = self.guard
         first = self._verify(x0, mpc.control, traffic, t, s0, tm) if guard is not None else None
         if first is not None and not first.verified:  # the plan is unsafe: no sampling, the fail-safe now
-            return self._fall_back(x0, u_star, mpc, first, 0, mpc_rob, intended, tm, t_start)
+            return self._fall_back(x0, u_star, mpc, first, 0, mpc_rob, intended, tm, t_start, first)
         if all(v >= 0 for v in mpc_rob.values()):
-            safety = guard.commit(first) if guard is not None and first is not None else OFF
+            safety = self._first(guard.commit(first), first) if guard is not None and first is not None else OFF
             return self._done(Action.MPC, mpc, 0, mpc_rob, intended, safety, tm, t_start)
 
         target = ro.states[0][:, [0, 1, 2, 3]] if target is None else np.asarray(target, dtype=float)
@@ -141,8 +142,9 @@ class LowLevelController:
         again = first if np.array_equal(choice.control, mpc.control) else self._verify(x0, choice.control, traffic,
                                                                                       t, s0, tm)
         if not again.verified:
-            return self._fall_back(x0, u_star, choice, again, sampled.tried, mpc_rob, intended, tm, t_start)
-        return self._done(action, choice, sampled.tried, mpc_rob, intended, guard.commit(again), tm, t_start)
+            return self._fall_back(x0, u_star, choice, again, sampled.tried, mpc_rob, intended, tm, t_start, first)
+        return self._done(action, choice, sampled.tried, mpc_rob, intended, self._first(guard.commit(again), first), tm,
+                          t_start)
 
     def start(self, x0: np.ndarray, traffic: TrafficState, t: float, s0: float) -> Verdict | None:
         """Check the initial state (:meth:`Guard.start`); None when the safety layer is off."""
@@ -157,12 +159,14 @@ class LowLevelController:
         return v
 
     def _fall_back(self, x0: np.ndarray, u_star: np.ndarray, choice: Choice, refuted: Verdict, tried: int,
-                   mpc_rob: dict[str, float], intended: np.ndarray, tm: dict[str, float], t_start: float
-                   ) -> Decision:
+                   mpc_rob: dict[str, float], intended: np.ndarray, tm: dict[str, float], t_start: float,
+                   first: Verdict) -> Decision:
         """The kept fail-safe's command (decision ``failsafe``); without one, full braking with the
-        plan's steering, unverified (decision ``brake``)."""
+        plan's steering, unverified (decision ``brake``). ``refuted``: the verdict on the rules'
+        choice; ``first``: on u*'s first command."""
         assert self.guard is not None
         u, safety = self.guard.fall_back(x0, refuted)
+        safety = self._first(safety, first)
         if u is None:
             brake = Choice(choice.worst, np.array([u_star[0, 0], -1.0]), self._accel(-1.0, x0), choice.robustness,
                            choice.states)
@@ -179,3 +183,7 @@ class LowLevelController:
         tm["total"] = (time.perf_counter() - t_start) * 1e3
         return Decision(action, choice.control, choice.accel, tried, choice.robustness, mpc_rob, choice.states, tm,
                         safety, intended)
+
+    def _first(self, check: Check, first: Verdict) -> Check:
+        """``check`` recording whether u*'s first command verified."""
+        return replace(check, plan_first=first.verified)

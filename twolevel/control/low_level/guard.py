@@ -56,12 +56,14 @@ class Check:
     """The safety layer's record of one step: the ``outcome``; the fail-safe in force after it
     (``failsafe``: its manoeuvre, and for an executed one the step into it, e.g. ``brake 4 @3``);
     why the control the rules chose did not verify (``refuted``: the last fail-safe's
-    refutation, empty when it verified); how many participants could come near (``near``)."""
+    refutation, empty when it verified); how many participants could come near (``near``);
+    whether the plan's own first command (u*_0) verified (``plan_first``; None: not checked)."""
 
     outcome: Outcome
     failsafe: str = ""
     refuted: str = ""
     near: int = 0
+    plan_first: bool | None = None
 
 
 OFF = Check(Outcome.OFF)
