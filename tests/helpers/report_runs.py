@@ -36,7 +36,8 @@ def write_run(
         "map_lines": [[[-20.0, -1.75], [400.0, -1.75]], [[-20.0, 1.75], [400.0, 1.75]], [[-20.0, 5.25], [400.0, 5.25]]],
     }
     base.update(meta or {})
-    w = TraceWriter(run_dir, BASE_COLUMNS + tuple(f"rob_{r}" for r in rules), base)
+    extra = tuple(k for k in ("verification", "ttr_s") if rows and k in rows[0])
+    w = TraceWriter(run_dir, BASE_COLUMNS + tuple(f"rob_{r}" for r in rules) + extra, base)
     for row in rows:
         w.write(row)
     w.close(status, summary if summary is not None else {"collisions": []})
@@ -79,6 +80,8 @@ def traffic_rows(n: int = 300, *, dt: float = 0.1, seed: int = 0, slow: float = 
             "tracking_error": abs(0.05 * math.sin(t[k])) + 0.01 * (k % 7), "v_max": v_max[k], "light_state": light[k],
             "rob_speed_limit": v_max[k] + 0.5 - v[k], "rob_stop_sign": 1.0 if t[k] < 11 or t[k] > 13 else 0.2,
             "rob_red_light": 2.0, "rob_collision": gap - 1.0,
+            "verification": "verified" if decision != "brake" else "failsafe",
+            "ttr_s": (3.0 if decision == "mpc" else 0.0) if k % 5 == 0 else float("nan"),
         })
         frames.append({
             "t": t[k], "ego": [x[k], 0.0, 0.0, 4.22, 1.8],

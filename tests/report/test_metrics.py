@@ -29,6 +29,8 @@ ROB = [1.0, -1.0, -2.0, -0.5, 0.5, NAN, -3.0, -3.0, 0.0, -1.0]
 DECISION = ["mpc"] * 6 + ["sampled", "sampled", "brake", "fallback"]
 LIGHT = ["none"] * 4 + ["red"] * 3 + ["green"] * 3
 NEAR = [0, 1, 2, 3, 3, 2, 1, 0, 0, 0]
+OUTCOME = ["verified"] * 6 + ["failsafe", "failsafe", "verified", "verified"]
+TTR = [3.0, NAN, NAN, NAN, NAN, 0.5, NAN, NAN, NAN, NAN]
 
 
 def _hand_rows() -> list[dict[str, object]]:
@@ -38,6 +40,7 @@ def _hand_rows() -> list[dict[str, object]]:
             "t_high_ms": STEP_MS[k] / 2, "t_low_ms": STEP_MS[k] / 2 - 1, "t_step_ms": STEP_MS[k],
             "n_near": NEAR[k], "min_dist": GAP[k] + COLLISION_LINE_M, "min_gap": GAP[k],
             "tracking_error": TRACK[k], "v_max": VMAX[k], "light_state": LIGHT[k], "rob_speed": ROB[k],
+            "verification": OUTCOME[k], "ttr_s": TTR[k],
         }
         for k in range(10)
     ]
@@ -45,7 +48,9 @@ def _hand_rows() -> list[dict[str, object]]:
 
 @pytest.fixture
 def hand(tmp_path):
-    summary = {"collisions": [{"t": 0.3, "x": 6.0, "y": 0.5, "other": "car_1"}, {"t": 0.8, "x": 16.0, "y": 0.5, "other": "car_2"}]}
+    summary = {"collisions": [{"t": 0.3, "x": 6.0, "y": 0.5, "other": "car_1", "at_fault": True, "verdict": "ego_at_fault",
+                               "reason": "drove into it"},
+                              {"t": 0.8, "x": 16.0, "y": 0.5, "other": "car_2"}]}  # an older run: not classified
     write_run(tmp_path / "hand", _hand_rows(), rules=("speed",), summary=summary)
     return compute_metrics(read_run(tmp_path / "hand"))
 
@@ -92,6 +97,8 @@ def test_collisions_from_gap_and_summary(hand) -> None:
     assert [(round(e.t_start, 6), round(e.t_end, 6), e.depth_m, e.x) for e in eps] == [(0.3, 0.5, -1.2, 6.0), (0.8, 0.8, -0.3, 16.0)]
     assert [r.other for r in hand.collisions.reported] == ["car_1", "car_2"]
     assert hand.collisions.collided and hand.collisions.count == 2
+    assert [r.at_fault for r in hand.collisions.reported] == [True, None] and hand.collisions.at_fault == 1
+    assert hand.collisions.reported[0].reason == "drove into it"
     d = hand.distance
     assert d.min_gap_m == -1.2 and d.t_min_gap_s == pytest.approx(0.4)
     assert d.min_dist_m == pytest.approx(COLLISION_LINE_M - 1.2) and d.below_line
@@ -103,7 +110,7 @@ def test_decisions_lights_nearby(hand) -> None:
     dec = hand.decisions
     assert dec.count("mpc") == 6 and dec.share("sampled") == pytest.approx(0.2)
     assert dec.share("brake") == pytest.approx(0.1) and dec.share("fallback") == pytest.approx(0.1) and dec.count("nmpc") == 0
-    assert dict(dec.level_shares) == pytest.approx({"high": 0.7, "low": 0.3, "nmpc": 0.0})
+    assert dict(dec.level_shares) == pytest.approx({"high": 0.7, "low": 0.3, "safety": 0.0, "nmpc": 0.0})
     assert hand.lights.share("none") == pytest.approx(0.4) and hand.lights.share("red") == pytest.approx(0.3)
     assert hand.lights.share("green") == pytest.approx(0.3) and hand.lights.share("yellow") == 0.0
     assert hand.nearby.max == 3 and hand.nearby.mean == pytest.approx(1.2)
@@ -208,3 +215,11 @@ def test_a_time_column_running_backwards_is_a_problem(tmp_path) -> None:
             w.write({"t": t, "v": 1.0})
     m = compute_metrics(read_run(tmp_path))
     assert any("does not increase at row 3" in p for p in m.problems)
+
+
+def test_the_safety_layer_and_braking(hand) -> None:
+    sf = hand.safety
+    assert dict(sf.outcomes) == {"verified": 8, "failsafe": 2, "unverified": 0, "off": 0}
+    assert sf.ttr_min_s == 0.5
+    # v drops 10 → 8 m/s in one step (20 m/s²) and comes back: one step of nine brakes harder than 4 m/s²
+    assert sf.decel_peak_mps2 == pytest.approx(20.0) and sf.hard_braking_share == pytest.approx(1 / 9)

@@ -10,7 +10,9 @@ from typing import Any, Mapping, Sequence
 from twolevel.report.figures import RenderedFigure
 from twolevel.report.comparison import ComparisonTable
 from twolevel.report.metrics import DECISION_LEVEL, Metrics
-from twolevel.report.summary import alerts, comparison_rows, fmt, headline, pct, provenance, provenance_text
+from twolevel.report.summary import (
+    COLLISION_HEADER, alerts, collision_rows, comparison_rows, fmt, headline, pct, provenance, provenance_text,
+)
 
 _CSS = """
 body{font-family:system-ui,-apple-system,"Segoe UI",sans-serif;margin:2em auto;max-width:1100px;color:#222;padding:0 1em}
@@ -102,8 +104,7 @@ def _collisions_section(m: Metrics) -> str:
                             [(fmt(e.t_start, 2), fmt(e.t_end, 2), fmt(e.depth_m), fmt(e.x, 2), fmt(e.y, 2)) for e in c.episodes], numeric_from=0))
     if c.reported:
         parts.append("<h3>Recorded by the simulator (run.json)</h3>")
-        parts.append(_table(("t [s]", "x [m]", "y [m]", "other vehicle"),
-                            [(fmt(r.t, 2), fmt(r.x, 2), fmt(r.y, 2), r.other) for r in c.reported], numeric_from=0))
+        parts.append(_table(COLLISION_HEADER, collision_rows(c.reported), numeric_from=0))
     return "".join(parts)
 
 

@@ -26,6 +26,8 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from twolevel.control.low_level.guard import Outcome
+from twolevel.sim.summary import HARD_BRAKING
 from twolevel.sim.summary import LEVEL as _LEVEL
 from twolevel.sim.summary import LEVELS as _LEVELS
 from twolevel.sim.summary import StepDecision
@@ -41,6 +43,8 @@ DECISIONS: tuple[str, ...] = tuple(d.value for d in StepDecision)
 #: Which part of the controller chose the applied control, per decision (one table: the simulator's).
 DECISION_LEVEL: Mapping[str, str] = _LEVEL
 LEVELS: tuple[str, ...] = _LEVELS
+#: The safety layer's outcomes per step (the trace's ``verification``).
+OUTCOMES: tuple[str, ...] = tuple(o.value for o in Outcome)
 LIGHT_STATES: tuple[str, ...] = ("none", "green", "yellow", "red")
 RULE_PREFIX = "rob_"
 
@@ -209,12 +213,16 @@ class CollisionEpisode(_Serialisable):
 
 @dataclass(frozen=True)
 class ReportedCollision(_Serialisable):
-    """A collision the simulator recorded in run.json's summary."""
+    """A collision the simulator recorded in run.json's summary, with whether it was the ego's
+    fault (None: not recorded, an older run), the verdict and the reason."""
 
     t: float
     x: float
     y: float
     other: str
+    at_fault: bool | None = None
+    verdict: str = ""
+    reason: str = ""
 
 
 @dataclass(frozen=True)
@@ -230,6 +238,23 @@ class CollisionMetrics(_Serialisable):
     def count(self) -> int:
         return max(len(self.episodes), len(self.reported))
 
+    @property
+    def at_fault(self) -> int:
+        """Recorded collisions that were the ego's fault."""
+        return sum(1 for r in self.reported if r.at_fault)
+
+
+@dataclass(frozen=True)
+class SafetyMetrics(_Serialisable):
+    """The safety layer per step (the trace's ``verification``): steps per outcome, the smallest
+    time to react recorded [s] (``ttr_s``), and braking: the peak deceleration over one step
+    [m/s²] and the share of steps braking harder than ``hard_mps2`` (from the speed column)."""
+
+    outcomes: tuple[tuple[str, int], ...]
+    ttr_min_s: float
+    decel_peak_mps2: float
+    hard_braking_share: float
+    hard_mps2: float = HARD_BRAKING
 
 @dataclass(frozen=True)
 class Metrics(_Serialisable):
@@ -253,12 +278,14 @@ class Metrics(_Serialisable):
     violations: tuple[Violation, ...]
     decisions: DecisionMetrics | None
     collisions: CollisionMetrics
+    safety: SafetyMetrics | None = None
     problems: tuple[str, ...] = field(default=())
 
     def to_dict(self) -> dict[str, Any]:
         d = _jsonable(self)
         d["collisions"]["collided"] = self.collisions.collided
         d["collisions"]["count"] = self.collisions.count
+        d["collisions"]["at_fault"] = self.collisions.at_fault
         return d
 
 
@@ -446,13 +473,30 @@ def _collisions(gap: np.ndarray | None, t: np.ndarray, x: np.ndarray | None, y: 
     raw = summary.get("collisions", []) if isinstance(summary, Mapping) else []
     for c in raw if isinstance(raw, list) else []:
         if isinstance(c, Mapping):
-            reported.append(ReportedCollision(_f(c.get("t")), _f(c.get("x")), _f(c.get("y")), str(c.get("other", ""))))
+            fault = c.get("at_fault")
+            reported.append(ReportedCollision(_f(c.get("t")), _f(c.get("x")), _f(c.get("y")), str(c.get("other", "")),
+                                              fault if isinstance(fault, bool) else None, str(c.get("verdict", "")),
+                                              str(c.get("reason", ""))))
     if summary is not None and gap is not None and bool(episodes) != bool(reported):
         problems.append(
             f"run.json's summary records {len(reported)} collision(s) but the trace's min_gap shows "
             f"{len(episodes)} overlap episode(s)"
         )
     return CollisionMetrics(tuple(episodes), tuple(reported))
+
+
+def _safety(outcomes: list[str] | None, ttr: np.ndarray | None, v: np.ndarray | None, t: np.ndarray
+            ) -> SafetyMetrics | None:
+    if outcomes is None and v is None:
+        return None
+    arr = np.array([o.strip() for o in outcomes or []], dtype=object)
+    names = list(OUTCOMES) + sorted(set(arr.tolist()) - set(OUTCOMES))
+    counts = tuple((o, int(np.count_nonzero(arr == o))) for o in names)
+    finite = ttr[np.isfinite(ttr)] if ttr is not None else np.zeros(0)
+    decel = -np.diff(v) / np.diff(t) if v is not None and v.size > 1 and np.all(np.diff(t) > 0) else np.zeros(0)
+    return SafetyMetrics(counts, float(finite.min()) if finite.size else math.nan,
+                         float(max(decel.max(), 0.0)) if decel.size else math.nan,
+                         float(np.mean(decel > HARD_BRAKING)) if decel.size else math.nan)
 
 
 def _f(value: Any) -> float:
@@ -490,6 +534,8 @@ def compute_metrics(run: RunData, label: str | None = None) -> Metrics:
     near = cols.num("n_near", "nearby count")
     light = cols.text("light_state", "light state")
     dec = cols.text("decision", "decisions")
+    outcomes = cols.text("verification", "the safety layer's outcomes")
+    ttr = cols.num("ttr_s", "time to react")
     x, y = cols.num("x", "position"), cols.num("y", "position")
     rules, violations = [], []
     for name in rule_names(run):
@@ -526,6 +572,7 @@ def compute_metrics(run: RunData, label: str | None = None) -> Metrics:
         violations=tuple(violations),
         decisions=_decisions(dec) if dec is not None and has else None,
         collisions=collisions,
+        safety=_safety(outcomes, ttr, v, t) if has else None,
         problems=tuple(problems + [p for p in cols.problems if p not in problems]),
     )
 
@@ -537,7 +584,7 @@ def _default_label(run: RunData) -> str:
 
 
 __all__ = [
-    "COLLISION_LINE_M", "STEP_BUDGET_MS", "Distribution", "Metrics", "Violation", "RuleMetrics",
+    "COLLISION_LINE_M", "STEP_BUDGET_MS", "Distribution", "Metrics", "Violation", "RuleMetrics", "SafetyMetrics",
     "compute_metrics", "find_violations",
     "distribution", "intervals", "sample_durations", "rule_names",
 ]

@@ -10,7 +10,7 @@ import math
 from typing import Any, Mapping, Sequence
 
 from twolevel.report.comparison import ComparisonTable
-from twolevel.report.metrics import COLLISION_LINE_M, DECISION_LEVEL, Metrics, _jsonable
+from twolevel.report.metrics import COLLISION_LINE_M, DECISION_LEVEL, Metrics, ReportedCollision, _jsonable
 
 #: run.json keys shown in the provenance table, in order (the rest are listed after them).
 PROVENANCE_KEYS = ("scenario", "status", "error", "rows", "seed", "settings", "rules", "versions", "wall_time_s")
@@ -76,8 +76,17 @@ def headline(m: Metrics) -> list[tuple[str, str]]:
         rows += [("nearby vehicles, max / mean", f"{m.nearby.max} / {fmt(m.nearby.mean, 2)}")]
     rows += [
         ("rule violations", f"{len(m.violations)} in {sum(1 for r in m.rules if not r.satisfied)} of {len(m.rules)} rule(s)"),
-        ("collisions", fmt(m.collisions.count) + (" — COLLIDED" if m.collisions.collided else "")),
+        ("collisions", fmt(m.collisions.count) + (" — COLLIDED" if m.collisions.collided else "")
+         + (f", {m.collisions.at_fault} the ego's fault" if m.collisions.reported else "")),
     ]
+    if m.safety is not None:
+        sf = m.safety
+        rows += [
+            ("safety layer", ", ".join(f"{o} {n}" for o, n in sf.outcomes if n) or "—"),
+            ("time to react, min", fmt(sf.ttr_min_s, 2, "s")),
+            ("peak deceleration", fmt(sf.decel_peak_mps2, 2, "m/s²")),
+            (f"steps braking > {sf.hard_mps2:g} m/s²", pct(sf.hard_braking_share)),
+        ]
     if m.decisions is not None:
         rows += [("decisions", ", ".join(f"{d} {pct(s)}" for d, s in m.decisions.shares if s > 0) or "—")]
     return rows
@@ -95,7 +104,8 @@ def alerts(m: Metrics, meta: Mapping[str, Any]) -> list[str]:
         out.append("No steps could be read: this report has no metrics or figures.")
     if m.collisions.collided:
         first = min([e.t_start for e in m.collisions.episodes] + [c.t for c in m.collisions.reported])
-        out.append(f"COLLISION: {m.collisions.count} collision(s), the first at t = {fmt(first, 2)} s.")
+        fault = f"; {m.collisions.at_fault} the ego's fault" if m.collisions.reported else ""
+        out.append(f"COLLISION: {m.collisions.count} collision(s), the first at t = {fmt(first, 2)} s{fault}.")
     if m.violations:
         rules = sorted({v.rule for v in m.violations})
         out.append(f"{len(m.violations)} rule violation(s) in {', '.join(rules)}.")
@@ -134,6 +144,15 @@ def summary_payload(
         "compared": [m.to_dict() for m in compared],
         "comparison": comparison.to_dict() if comparison is not None else None,
     }
+
+
+COLLISION_HEADER = ("t [s]", "x [m]", "y [m]", "other", "ego at fault", "why")
+
+
+def collision_rows(reported: Sequence[ReportedCollision]) -> list[tuple[str, ...]]:
+    """The simulator's collisions as table rows (see :data:`COLLISION_HEADER`)."""
+    return [(fmt(r.t, 2), fmt(r.x, 2), fmt(r.y, 2), r.other,
+             "—" if r.at_fault is None else ("YES" if r.at_fault else "no"), r.reason or "—") for r in reported]
 
 
 def _md_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
@@ -194,8 +213,7 @@ def render_markdown(
             parts.append(_md_table(("from [s]", "to [s]", "deepest overlap [m]", "x [m]", "y [m]"),
                                    [(fmt(e.t_start, 2), fmt(e.t_end, 2), fmt(e.depth_m), fmt(e.x, 2), fmt(e.y, 2)) for e in c.episodes]))
         if c.reported:
-            parts += ["", "Recorded by the simulator:", "", _md_table(("t [s]", "x [m]", "y [m]", "other"),
-                      [(fmt(r.t, 2), fmt(r.x, 2), fmt(r.y, 2), r.other) for r in c.reported])]
+            parts += ["", "Recorded by the simulator:", "", _md_table(COLLISION_HEADER, collision_rows(c.reported))]
     if metrics.decisions is not None:
         parts += ["", "## Decisions", "", _md_table(("decision", "level", "steps", "share"),
                   [(d, DECISION_LEVEL.get(d, "other"), str(n), pct(s)) for (d, n), (_, s) in zip(metrics.decisions.counts, metrics.decisions.shares)])]
