@@ -37,7 +37,7 @@ def test_shipped_tree_is_clean() -> None:
     res = run("check", str(ROOT / "rules"), str(ROOT / "maps"), str(ROOT / "scenarios"), str(ex / "scenario"), "-f", "json")
     payload = json.loads(res.stdout)
     assert res.exit_code == 0, res.stdout
-    assert payload["diagnostics"] == [] and payload["files_checked"] == len(list((ROOT / "rules").glob("*.stl"))) + len(list((ROOT / "maps").glob("*.yaml"))) + len(list((ROOT / "scenarios").glob("*.yaml"))) + 2
+    assert payload["diagnostics"] == [] and payload["files_checked"] == len(list((ROOT / "rules").glob("*.stl"))) + len(list((ROOT / "maps").glob("*.yaml"))) + len(list((ROOT / "scenarios").rglob("*.yaml"))) + 2
 
 
 def test_exit_codes(files: dict[str, Path]) -> None:
