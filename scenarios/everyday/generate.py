@@ -4,7 +4,7 @@ match it).
 
 A scripted participant follows waypoints {t [s], x [m], y [m]}, linear in between (constant
 velocity per piece, :mod:`twolevel.world.traffic`). To stay within the declared assumptions
-about others (``twolevel/safety/assumptions.py``) a manoeuvre is written as phases of constant
+about others (``twolevel/world/assumptions.py``) a manoeuvre is written as phases of constant
 acceleration sampled at the control period (0.1 s) — a change of speed between two waypoints
 is then one step's worth of the phase's acceleration — and every track is checked against the
 bounds here: vehicles ≤ 1.2 × the limit, |a| ≤ 8 m/s² (driving power-limited above 7.319 m/s:

@@ -1,5 +1,5 @@
 """Adversarial but legal traffic: small scenarios whose other road users behave as badly as the
-declared assumptions allow (:mod:`twolevel.safety.assumptions`), for the property test "the ego
+declared assumptions allow (:mod:`twolevel.world.assumptions`), for the property test "the ego
 is never at fault" and its benchmark.
 
 The world is a straight two-lane one-way road (lanes ``right`` and ``left``, 3.5 m, limit

@@ -17,7 +17,7 @@ from twolevel.models import fourwheel as fw
 from twolevel.models.rollout import rollout
 from twolevel.world.sensing import Memory
 
-from mpc_worlds import highway_world
+from helpers.mpc_worlds import highway_world
 
 SPEED = "input float v\ninput float v_max\nspeed = always[0:1] (v <= v_max + 0.5);\n"
 KEEP = np.tile([0.0, 0.0], (10, 1))  # [δ, a]: hold the speed
