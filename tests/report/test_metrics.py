@@ -48,8 +48,8 @@ def _hand_rows() -> list[dict[str, object]]:
 
 @pytest.fixture
 def hand(tmp_path):
-    summary = {"collisions": [{"t": 0.3, "x": 6.0, "y": 0.5, "other": "car_1", "at_fault": True, "verdict": "ego_at_fault",
-                               "reason": "drove into it"},
+    summary = {"collisions": [{"t": 0.3, "x": 6.0, "y": 0.5, "other": "car_1", "at_fault": True,
+                               "verdict": "ego_at_fault", "reason": "drove into it"},
                               {"t": 0.8, "x": 16.0, "y": 0.5, "other": "car_2"}]}  # an older run: not classified
     write_run(tmp_path / "hand", _hand_rows(), rules=("speed",), summary=summary)
     return compute_metrics(read_run(tmp_path / "hand"))

@@ -54,7 +54,8 @@ invariably safe states).
     network_of(world) -> Network                                                # network.py
     roll(x0, plan, route, s0, dt, params, settings=FailSafeSettings(), backend="auto") -> list[FailSafe]  # failsafe.py
     classify(t, ego, other, ego_box, other_box, *, other_inside=None, ego_lane=None, other_lane=None,
-             stop_speed=0.1, response_time=2.0) -> Responsibility              # responsibility.py
+             stop_speed=0.1, response_time=2.0, standing_in=None, brake_min=4.0,
+             brake_max=8.0) -> Responsibility                                   # responsibility.py
     stayed_within(ctx, traffic_states, i) -> np.ndarray
 
 Records: :class:`Verdict` (``verified``, ``failsafe``, ``refutations``, ``horizon``,

@@ -54,8 +54,8 @@ from twolevel.safety.network import CELL_LENGTH, CELL_TURN, LIGHT, STOP_SIGN, Ne
 from twolevel.safety.polygons import OCTAGON_NORMALS, band_pieces, disc_hull_octagons, lane_point
 from twolevel.world.traffic import RED, TrafficState
 
-__all__ = ["Intervals", "Occupancy", "predict", "travel_max", "travel_min", "time_to_travel", "lane_of", "STOP_ZONE",
-           "STANDING"]
+__all__ = ["Intervals", "Occupancy", "predict", "travel_max", "travel_min", "time_to_travel", "lane_of",
+           "STOP_ZONE", "STANDING"]
 
 STOP_ZONE = 3.0
 """A user standing this close before a stop sign's line [m] may have served it (no cap)."""
@@ -329,8 +329,8 @@ def predict(net: Network, traffic: TrafficState, t: float, intervals: Intervals,
         np.concatenate([p[i] for p in parts]) for i in range(9))
     fh = np.where(on_lane[:, None], front_hi, np.nan)
     rl = np.where(on_lane[:, None], rear_lo, np.nan)
-    return Occupancy(intervals, points, axes, centre, radius, extent, interval, owner, piece_lane, changed, idx, ~on_lane,
-                     fh, rl)
+    return Occupancy(intervals, points, axes, centre, radius, extent, interval, owner, piece_lane, changed, idx,
+                     ~on_lane, fh, rl)
 
 
 def _empty(iv: Intervals, idx: np.ndarray, P: int, J: int) -> Occupancy:

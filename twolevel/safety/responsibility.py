@@ -46,8 +46,7 @@ from twolevel.safety.verify import Context
 from twolevel.world.traffic import TrafficState
 
 __all__ = ["EGO_AT_FAULT", "EGO_STANDING", "HIT_FROM_BEHIND", "CUT_IN", "OTHER_BROKE_ASSUMPTIONS", "Responsibility",
-           "classify",
-           "contains", "stayed_within"]
+           "classify", "contains", "stayed_within"]
 
 EGO_AT_FAULT = "ego_at_fault"
 EGO_STANDING = "ego_standing"
@@ -60,8 +59,8 @@ _ALIGNED = math.cos(math.radians(45.0))
 @dataclass(frozen=True)
 class Responsibility:
     """The classification of one collision: ``verdict`` (one of :data:`EGO_AT_FAULT`,
-    :data:`EGO_STANDING`, :data:`HIT_FROM_BEHIND`, :data:`CUT_IN`, :data:`OTHER_BROKE_ASSUMPTIONS`), ``at_fault``,
-    the time of contact ``t`` [s], the ego's speed then ``ego_speed`` [m/s], when the other first
+    :data:`EGO_STANDING`, :data:`HIT_FROM_BEHIND`, :data:`CUT_IN`,
+    :data:`OTHER_BROKE_ASSUMPTIONS`), ``at_fault``, the time of contact ``t`` [s], the ego's speed then ``ego_speed`` [m/s], when the other first
     left its predicted occupancy ``left_at`` [s] (None: it did not), and a sentence ``reason``."""
 
     verdict: str

@@ -44,8 +44,8 @@ the rules read (a, s, e, d_stop, light_red, d_light, d_lead, v_lead; v, v_max, m
 n_near are base columns), a few controller columns (``candidates``; ``ll_violated``: the rules u*
 broke on the detailed prediction, i.e. why the low level intervened; ``hl_status``, ``hl_qps``,
 ``t_plant_ms``; the safety layer's ``verification``, ``failsafe``, ``refuted``, ``ttr_s``,
-``t_verify_ms``; ``t_step_cpu_ms``: the control step's CPU time), then ``rob_<rule>`` per rule: the robustness at that step on the *executed*
-trajectory, by the online monitor — exactly what ``twolevel monitor rules.stl trace.csv``
+``t_verify_ms``; ``t_step_cpu_ms``: the control step's CPU time), then ``rob_<rule>`` per rule:
+the robustness at that step on the *executed* trajectory, by the online monitor — exactly what ``twolevel monitor rules.stl trace.csv``
 computes from the same file. A rule whose window looks ahead L steps is final L steps later, so
 rows are written with that delay; when the run ends, is interrupted (Ctrl-C) or crashes, the
 remaining rows are completed with the windows truncated at the end (RTAMT's semantics) and
@@ -55,10 +55,9 @@ written before ``run.json`` records the status. Only a killed process loses the 
 stands still (speed ≤ the scenario's stop_speed) within :data:`GOAL_ZONE` of the goal or past it;
 the summary (and ``run.json``) records that time as ``goal_reached_t`` [s] (None otherwise).
 
-**Determinism.** Everything but the timing columns (``t_high_ms``, ``t_low_ms``, ``t_step_ms``,
-``t_plant_ms``, ``t_verify_ms``, ``t_step_cpu_ms``) is a function of the scenario and the seed, provided the high level is
-(its time limit can make a plan depend on the machine's speed; the default mode search is
-deterministic in practice).
+**Determinism.** Everything but the timing columns (:data:`TIMING_COLUMNS`) is a function of
+the scenario and the seed, provided the high level is (its time limit can make a plan depend on
+the machine's speed; the default mode search is deterministic in practice).
 """
 
 from __future__ import annotations
@@ -107,7 +106,7 @@ __all__ = ["simulate_scenario", "ClosedLoop", "StepInfo", "RunSummary", "Collisi
 GOAL_ZONE = 1.0
 """[m] How far before the goal a standstill counts as arrived."""
 TIMING_COLUMNS = ("t_high_ms", "t_low_ms", "t_step_ms", "t_plant_ms", "t_verify_ms", "t_step_cpu_ms")
-"""Wall-clock columns (excluded from determinism comparisons)."""
+"""Timing columns, wall clock and the step's CPU time (excluded from determinism comparisons)."""
 SIGNAL_COLUMNS = tuple(name for name in SIGNALS if name not in BASE_COLUMNS)
 """Signal columns beyond the base ones, named as the rules read them (a, s, e, d_stop, light_red,
 d_light, d_lead, v_lead)."""

@@ -69,7 +69,8 @@ def test_a_standing_car_that_braking_cannot_help_takes_the_least_violating_choic
     x0 = fw.initial_state(w.ego.x, w.ego.y + 1.5, 0.15, 0.0)
     u = np.tile([-0.4, 2.0], (10, 1))
     d = ll.decide(x0, u, 0.0, w.traffic0, Memory.fresh(w), 20.0, None)
-    plain = LowLevelController.from_rulesets(w, [rs], settings=LowLevelSettings(samples=40, seed=7, least_violation=False, safety=False))
+    plain = LowLevelController.from_rulesets(w, [rs], settings=LowLevelSettings(samples=40, seed=7, least_violation=False,
+                                                                                safety=False))
     b = plain.decide(x0, u, 0.0, w.traffic0, Memory.fresh(w), 20.0, None)
     assert b.decision == "brake" and b.robustness["safe"] < 0
     assert d.decision == "least_violation" and d.robustness["safe"] > b.robustness["safe"]

@@ -33,7 +33,8 @@ def _pair(w, rs, v: float, u: np.ndarray, *, samples: int = 200, step: int = 0, 
           psi: float | None = None):  # noqa: ANN001
     out = []
     for screen in ((), (3,), (3, 6), (2, 5, 8)):
-        ll = LowLevelController.from_rulesets(w, [rs], settings=LowLevelSettings(samples=samples, seed=7, screen=screen, safety=False))
+        ll = LowLevelController.from_rulesets(w, [rs], settings=LowLevelSettings(samples=samples, seed=7, screen=screen,
+                                                                                 safety=False))
         x0 = fw.initial_state(w.ego.x, w.ego.y + y, w.ego.psi if psi is None else psi, v)
         out.append((ll, ll.decide(x0, u, 0.0, w.traffic0, Memory.fresh(w), 20.0, None, step=step)))
     (off_ll, off), *screened = out
