@@ -43,7 +43,8 @@ def main() -> None:
         others = random_adversaries(rng, int(rng.integers(1, 6)), args.seconds)
         with tempfile.TemporaryDirectory() as tmp:
             path = scenario_text(Path(tmp), others, float(rng.uniform(0, 15)), float(args.seconds))
-            s, diags = simulate_scenario(str(path), str(Path(tmp) / "run"), controller="reckless", frames=False)
+            s, diags = simulate_scenario(str(path), str(Path(tmp) / "run"), controller="reckless", frames=False,
+                                         ttr_every=0)
         assert s is not None, [d.message for d in diags]
         if not s.safe_start:
             continue

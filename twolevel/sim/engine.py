@@ -32,7 +32,7 @@ ones) are recorded with time, place, the other vehicle and who is responsible
 the low level brakes, and those steps are recorded as ``unverified``. Every step records the
 outcome (``verification``: verified / failsafe / unverified / off), the fail-safe in force
 (``failsafe``), why the rules' choice did not verify (``refuted``) and, every
-:data:`TTR_EVERY` steps, the **time to react** ``ttr_s`` [s]
+:data:`TTR_EVERY` steps (``ttr_every``), the **time to react** ``ttr_s`` [s]
 (:func:`~twolevel.safety.verify.time_to_react` of the intended plan held on to
 :data:`TTR_HORIZON`: how long the car could still follow it before a fail-safe becomes
 necessary; −dt: not even now; ``TTR_HORIZON``: at least that long; empty between). It costs up
@@ -125,6 +125,7 @@ def simulate_scenario(
     *,
     monitor: bool = True,
     safety: bool = True,
+    ttr_every: int = TTR_EVERY,
     controller: str = "twolevel",
     seed: int | None = None,
     duration: float | None = None,
@@ -135,6 +136,8 @@ def simulate_scenario(
 
     ``monitor=False`` applies the plan's controls directly (the paper's "without monitor");
     ``safety=False`` keeps the paper's low level but without the safety layer (no verification).
+    ``ttr_every``: the time to react every that many steps (0: never; many short runs save a
+    third of their time without it).
     ``controller``: the high level, one of :data:`~twolevel.control.registry.CONTROLLERS`.
     ``seed`` / ``duration`` [s] override the scenario's ``run`` settings. ``progress`` is called
     after every step with a :class:`StepInfo`; if it raises ``KeyboardInterrupt`` the run stops
@@ -159,7 +162,8 @@ def simulate_scenario(
     run = scn.spec.run.model_copy(update={k: v for k, v in (("seed", seed), ("duration", duration)) if v is not None})
     scn = replace(scn, spec=scn.spec.model_copy(update={"run": run}))
     world = build_world(scn)
-    loop, more = ClosedLoop.create(world, scn, monitor=monitor, controller=controller, safety=safety)
+    loop, more = ClosedLoop.create(world, scn, monitor=monitor, controller=controller, safety=safety,
+                                   ttr_every=ttr_every)
     diags += more
     if loop is None:
         return None, diags
@@ -297,11 +301,12 @@ class ClosedLoop:
     records kept between steps."""
 
     def __init__(self, world: World, scn: Scenario, planner: Planner, rulesets: list[RuleSet], monitor: bool,
-                 controller: str, safety: bool = True) -> None:
+                 controller: str, safety: bool = True, ttr_every: int = TTR_EVERY) -> None:
         self.world, self.scn, self.planner = world, scn, planner
         self.monitor, self.controller = monitor, controller
         self.label = StepDecision(planner.label)  # the decision of its unchecked steps (no monitor)
         self.safety = monitor and safety
+        self.ttr_every = ttr_every
         self.rulesets = rulesets
         self.rules: list[RuleCheck]
         self.rules, self.consts = rule_checks(rulesets, world.settings.dt)
@@ -319,8 +324,8 @@ class ClosedLoop:
         self.t_wall0 = time.perf_counter()
 
     @classmethod
-    def create(cls, world: World, scn: Scenario, *, monitor: bool, controller: str, safety: bool = True
-               ) -> tuple["ClosedLoop | None", list[Diagnostic]]:
+    def create(cls, world: World, scn: Scenario, *, monitor: bool, controller: str, safety: bool = True,
+               ttr_every: int = TTR_EVERY) -> tuple["ClosedLoop | None", list[Diagnostic]]:
         """The loop of ``world`` with the planner named ``controller`` (``safety``: the low level's
         safety layer); None when the scenario's rules or the planner's settings are unusable (the
         diagnostics say why)."""
@@ -331,7 +336,7 @@ class ClosedLoop:
         diags += d
         if planner is None:
             return None, diags
-        return cls(world, scn, planner, sets, monitor, controller, safety), diags
+        return cls(world, scn, planner, sets, monitor, controller, safety, ttr_every), diags
 
     # ------------------------------------------------------------------------------ the run
     def run(self, out_dir: str, progress: Callable[[StepInfo], None] | None, frames: bool,
@@ -511,10 +516,10 @@ class ClosedLoop:
         return Applied(control, float(accel), decision, tried, why, safety, verify_ms, intended)
 
     def criticality(self, sensed: Sensed, applied: Applied) -> float:
-        """The time to react [s] every :data:`TTR_EVERY` steps (NaN in between; see the module
+        """The time to react [s] every ``ttr_every`` steps (NaN in between; see the module
         docstring): how long the intended plan, its last command held to :data:`TTR_HORIZON`,
         could still be followed with a verified fail-safe after it."""
-        if sensed.k % TTR_EVERY or applied.intended is None:
+        if self.ttr_every <= 0 or sensed.k % self.ttr_every or applied.intended is None:
             return math.nan
         dt = self.world.settings.dt
         first = applied.safety.plan_first
