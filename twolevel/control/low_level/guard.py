@@ -56,13 +56,12 @@ class Check:
     """The safety layer's record of one step: the ``outcome``; the fail-safe in force after it
     (``failsafe``: its manoeuvre, and for an executed one the step into it, e.g. ``brake 4 @3``);
     why the control the rules chose did not verify (``refuted``: the last fail-safe's
-    refutation, empty when it verified); how many participants could come near (``near``);
-    whether the plan's own first command (u*_0) verified (``plan_first``; None: not checked)."""
+    refutation, empty when it verified); whether the plan's own first command (u*_0) verified
+    (``plan_first``; None: not checked)."""
 
     outcome: Outcome
     failsafe: str = ""
     refuted: str = ""
-    near: int = 0
     plan_first: bool | None = None
 
 
@@ -101,21 +100,20 @@ class Guard:
         """The verified control runs: keep its fail-safe (from the state after this step)."""
         assert v.verified and v.failsafe is not None
         self.kept, self.k = v.failsafe, 0
-        return Check(Outcome.VERIFIED, v.failsafe.name, "", v.participants)
+        return Check(Outcome.VERIFIED, v.failsafe.name)
 
     def fall_back(self, x0: np.ndarray, refuted: Verdict | None) -> tuple[np.ndarray | None, Check]:
         """The kept fail-safe's command for now (and the step moves on), or None when there is
         none for the state ``x0`` (:data:`DRIFT`); ``refuted``: the verdict that failed."""
         why = str(refuted.refuted_by) if refuted is not None and refuted.refuted_by is not None else ""
-        near = refuted.participants if refuted is not None else 0
         fs = self.kept
         if fs is not None and self.k <= fs.steps:
             here = np.abs(np.asarray(x0[:4], dtype=float) - fs.states[self.k, :4])
             if not np.all(here <= DRIFT):
                 fs = self.kept = None
         if fs is None:
-            return None, Check(Outcome.UNVERIFIED, "", why, near)
+            return None, Check(Outcome.UNVERIFIED, "", why)
         u = fs.control_at(self.k)
-        check = Check(Outcome.FAILSAFE, f"{fs.name} @{self.k}", why, near)
+        check = Check(Outcome.FAILSAFE, f"{fs.name} @{self.k}", why)
         self.k += 1
         return u, check
