@@ -119,15 +119,13 @@ class RunSummary:
     Control-step times [ms] cover both controller levels and the sensing they need (not the
     plant or traffic simulation): median / p95 / p99 / max, and per level, wall clock; the same
     step's CPU time of the process (``step_cpu_ms_*``) is what it costs when other jobs share
-    the cores. ``control_rate_hz``
-    = steps per second of controller time; ``realtime`` = simulated time / wall time of the
-    whole loop. Tracking error [m] = |lateral offset| from the route. ``min_distance`` [m]: the
+    the cores. ``control_rate_hz`` = steps per second of controller time; ``realtime`` =
+    simulated time / wall time of the whole loop. Tracking error [m] = |lateral offset| from the route. ``min_distance`` [m]: the
     smallest centre-to-centre distance to any other vehicle (the paper's measure);
     ``min_gap`` [m]: the smallest box separation (< 0: overlap); ``closest``: the five vehicles
     that came closest (centre to centre), nearest first. The safety layer (``safety``: it was
-    on): ``safe_start`` (the
-    initial state had a fail-safe; None: the layer was off), ``verification``: steps per
-    outcome (verified, failsafe, unverified, off), ``at_fault``: collisions that were the ego's
+    on): ``safe_start`` (the initial state had a fail-safe; None: the layer was off),
+    ``verification``: steps per outcome (verified, failsafe, unverified, off), ``at_fault``: collisions that were the ego's
     fault, ``ttr_min_s`` [s]: the smallest time to react recorded. Braking: ``decel_peak``
     [m/s²]: the largest deceleration over one step (from the speeds), ``hard_braking_share``:
     the share of steps decelerating harder than :data:`HARD_BRAKING`."""
