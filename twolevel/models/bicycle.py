@@ -16,6 +16,10 @@ heading ψ + κs/2. This is exact also when v changes sign (s is then the signed
 :func:`step_columns` writes this map once, for numpy (:func:`step`, :func:`rollout`) and for
 casadi (the NMPC's shooting, :mod:`twolevel.control.nmpc.nlp`); :func:`linearize` differentiates
 it analytically for a whole horizon at once.
+
+The numpy functions take the step length ``dt`` [s] as a number or, for a horizon whose steps
+differ in length (fine near, coarse far), as one length per step: each step is discretised
+exactly for its own length.
 """
 
 from __future__ import annotations
@@ -65,12 +69,13 @@ def _sinc_and_derivative(theta: NDArray[np.float64]) -> tuple[NDArray[np.float64
     return sinc, dsinc
 
 
-def step_columns(X: Any, Y: Any, psi: Any, v: Any, delta: Any, a: Any, dt: float, l_f: float,
+def step_columns(X: Any, Y: Any, psi: Any, v: Any, delta: Any, a: Any, dt: Any, l_f: float,
                  xp: Any = NP) -> tuple[Any, Any, Any, Any]:
     """The exact zero-order-hold step on columns (one array or symbol per component): state X, Y
-    [m], ψ [rad], v [m/s], input δ [rad], a [m/s²], period ``dt`` [s], ``l_f`` [m] → X⁺, Y⁺, ψ⁺,
-    v⁺. Written once in the operations of ``xp``: numpy's (:data:`~twolevel.models.ops.NP`) for
-    :func:`step`, casadi's (:func:`~twolevel.models.ops.casadi_ops`) for the NMPC's shooting."""
+    [m], ψ [rad], v [m/s], input δ [rad], a [m/s²], period ``dt`` [s] (with numpy, also an array
+    broadcast against the columns), ``l_f`` [m] → X⁺, Y⁺, ψ⁺, v⁺. Written once in the operations
+    of ``xp``: numpy's (:data:`~twolevel.models.ops.NP`) for :func:`step`, casadi's
+    (:func:`~twolevel.models.ops.casadi_ops`) for the NMPC's shooting."""
     kappa = xp.tan(delta) / l_f
     s = v * dt + 0.5 * a * dt * dt
     theta = 0.5 * kappa * s
@@ -79,39 +84,43 @@ def step_columns(X: Any, Y: Any, psi: Any, v: Any, delta: Any, a: Any, dt: float
     return X + g * xp.cos(phi), Y + g * xp.sin(phi), psi + 2.0 * theta, v + a * dt
 
 
-def step(x: ArrayLike, u: ArrayLike, dt: float, params: BicycleParams = _DEFAULT) -> NDArray[np.float64]:
-    """Exact zero-order-hold step: x (..., 4), u (..., 2), dt [s] → x⁺ (..., 4)."""
+def step(x: ArrayLike, u: ArrayLike, dt: ArrayLike, params: BicycleParams = _DEFAULT) -> NDArray[np.float64]:
+    """Exact zero-order-hold step: x (..., 4), u (..., 2), dt [s] (a number, or broadcast against
+    x's leading dimensions) → x⁺ (..., 4)."""
     x = np.asarray(x, dtype=float)
     u = np.asarray(u, dtype=float)
-    return np.stack(step_columns(x[..., 0], x[..., 1], x[..., 2], x[..., 3], u[..., 0], u[..., 1], dt, params.l_f),
-                    axis=-1)
+    return np.stack(step_columns(x[..., 0], x[..., 1], x[..., 2], x[..., 3], u[..., 0], u[..., 1],
+                                 np.asarray(dt, dtype=float), params.l_f), axis=-1)
 
 
-def rollout(x0: ArrayLike, us: ArrayLike, dt: float, params: BicycleParams = _DEFAULT) -> NDArray[np.float64]:
-    """States over a horizon: x0 (..., 4), us (..., H, 2) → (..., H+1, 4), xs[..., 0, :] = x0.
+def rollout(x0: ArrayLike, us: ArrayLike, dt: ArrayLike, params: BicycleParams = _DEFAULT) -> NDArray[np.float64]:
+    """States over a horizon: x0 (..., 4), us (..., H, 2), dt [s] (a number or (H,) step lengths)
+    → (..., H+1, 4), xs[..., 0, :] = x0.
 
     Loops over the H steps (the recursion is sequential); everything else is batched.
     """
     us = np.asarray(us, dtype=float)
     x = np.broadcast_to(np.asarray(x0, dtype=float), us.shape[:-2] + (NX,))
+    h = np.broadcast_to(np.asarray(dt, dtype=float), (us.shape[-2],))
     out = [x]
     for k in range(us.shape[-2]):
-        x = step(x, us[..., k, :], dt, params)
+        x = step(x, us[..., k, :], float(h[k]), params)
         out.append(x)
     return np.stack(out, axis=-2)
 
 
 def linearize(
-    xs: ArrayLike, us: ArrayLike, dt: float, params: BicycleParams = _DEFAULT
+    xs: ArrayLike, us: ArrayLike, dt: ArrayLike, params: BicycleParams = _DEFAULT
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Jacobians of :func:`step` about (x̄_k, ū_k) for every k at once.
 
-    xs (H, 4), us (H, 2) → A (H, 4, 4), B (H, 4, 2), c (H, 4) with
-    step(x, u) ≈ A_k x + B_k u + c_k near (x̄_k, ū_k), exactly at it. Any leading batch
-    dimensions are allowed. No Python loop.
+    xs (H, 4), us (H, 2), dt [s] (a number or (H,) step lengths) → A (H, 4, 4), B (H, 4, 2),
+    c (H, 4) with step(x, u) ≈ A_k x + B_k u + c_k near (x̄_k, ū_k), exactly at it. Any leading
+    batch dimensions are allowed. No Python loop.
     """
     xs = np.asarray(xs, dtype=float)
     us = np.asarray(us, dtype=float)
+    dt = np.asarray(dt, dtype=float)
     psi, v = xs[..., 2], xs[..., 3]
     delta, a = us[..., 0], us[..., 1]
     tan_d = np.tan(delta)

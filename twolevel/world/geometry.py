@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 import weakref
 from dataclasses import dataclass, field
+from typing import Sequence
 
 import numpy as np
 
@@ -371,16 +372,19 @@ class Route(Polyline):
         cross = d[:, 0] * rel[:, 1] - d[:, 1] * rel[:, 0]
         return s, cross / np.sqrt(np.where(l2 > 0, l2, 1.0))
 
-    def reference(self, s0: float, v0: float, H: int, dt: float, a_max: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
+    def reference(self, s0: float, v0: float, H: int, dt: float | Sequence[float], a_max: float = 2.0
+                  ) -> tuple[np.ndarray, np.ndarray]:
         """Predicted route positions s_k [m] and speeds v_k [m/s], k = 0..H, advancing from
-        (s0, v0) towards the desired speed with |acceleration| ≤ ``a_max`` [m/s²]."""
+        (s0, v0) towards the desired speed with |acceleration| ≤ ``a_max`` [m/s²], over H steps
+        of ``dt`` [s] (or of the H step lengths ``dt``)."""
         s = np.empty(H + 1)
         v = np.empty(H + 1)
         s[0], v[0] = s0, v0
-        for k in range(H):  # H ≈ 10 scalar steps
+        h = [float(dt)] * H if np.ndim(dt) == 0 else [float(x) for x in dt]  # type: ignore[arg-type, union-attr]
+        for k in range(H):  # H ≈ 10–20 scalar steps
             target = float(self.desired_speed_at(s[k]))
-            v[k + 1] = min(max(target, v[k] - a_max * dt), v[k] + a_max * dt)
-            s[k + 1] = min(s[k] + 0.5 * (v[k] + v[k + 1]) * dt, self.s[-1])
+            v[k + 1] = min(max(target, v[k] - a_max * h[k]), v[k] + a_max * h[k])
+            s[k + 1] = min(s[k] + 0.5 * (v[k] + v[k + 1]) * h[k], self.s[-1])
         return s, v
 
 
