@@ -66,7 +66,7 @@ from typing import Any, Mapping, Sequence
 
 __all__ = [
     "VEHICLE", "CYCLIST", "PEDESTRIAN", "KIND_NAMES", "MotionBounds", "ResponseBounds", "Assumptions",
-    "VEHICLE_BOUNDS", "CYCLIST_BOUNDS", "PEDESTRIAN_BOUNDS", "RSS_BOUNDS", "safe_distance", "kinds_of",
+    "VEHICLE_BOUNDS", "CYCLIST_BOUNDS", "PEDESTRIAN_BOUNDS", "RSS_BOUNDS", "safe_distance", "stopping_speed", "kinds_of",
     "from_spec", "tighter_than_default",
 ]
 
@@ -133,15 +133,28 @@ class Assumptions:
         return (self.vehicle, self.cyclist, self.pedestrian)[kind]
 
 
-def safe_distance(v_rear: float, v_front: float, r: ResponseBounds = RSS_BOUNDS) -> float:
+def safe_distance(v_rear: Any, v_front: Any, r: ResponseBounds = RSS_BOUNDS) -> Any:
     """RSS's minimal safe longitudinal gap [m] between a rear car at ``v_rear`` and a front car
     at ``v_front`` [m/s], same direction: the rear one responds within ρ at up to accel_max,
     then brakes at brake_min; the front one brakes at up to brake_max (Shalev-Shwartz et al.
-    2017, Def. 1)."""
+    2017, Def. 1). Numbers or numpy arrays (elementwise, broadcast); convex in ``v_rear``."""
     v_resp = v_rear + r.time * r.accel_max
     d = (v_rear * r.time + 0.5 * r.accel_max * r.time**2 + v_resp**2 / (2 * r.brake_min)
          - v_front**2 / (2 * r.brake_max))
-    return max(0.0, d)
+    return (d + abs(d)) / 2  # max(0, d), exactly, for numbers and arrays alike
+
+
+def stopping_speed(distance: float, r: ResponseBounds = RSS_BOUNDS) -> float:
+    """The largest speed [m/s] of a rear car whose :func:`safe_distance` behind a standing one
+    is at most ``distance`` [m]: responding within ρ (at up to accel_max), then braking at
+    brake_min, it stops within ``distance``. 0 when even a standing rear car needs more."""
+    rho, acc, b = r.time, r.accel_max, r.brake_min
+    # v·ρ + acc·ρ²/2 + (v + ρ·acc)²/(2b) = distance, a quadratic in v
+    c = 0.5 * acc * rho**2 + (rho * acc) ** 2 / (2 * b) - distance
+    if c >= 0:
+        return 0.0
+    p = rho + rho * acc / b  # v²/(2b) + p·v + c = 0
+    return (-p + math.sqrt(p * p - 2 * c / b)) * b
 
 
 def kinds_of(ids: Sequence[str], a: Assumptions) -> list[int]:
