@@ -26,7 +26,7 @@ def test_plan_json_has_the_documented_shape() -> None:
     assert res.exit_code == 0, res.output
     out = json.loads(res.stdout)
     assert {"status", "objective", "solve_ms", "binaries", "rows", "columns", "plan", "rules"} <= set(out)
-    assert out["status"] == "optimal" and len(out["plan"]) == 11 and len(out["plan"][0]) == 7
+    assert out["status"] == "optimal" and len(out["plan"]) == 19 and len(out["plan"][0]) == 7
     assert {r["name"] for r in out["rules"]} >= {"speed_limit", "stop_sign", "red_light"}
 
 

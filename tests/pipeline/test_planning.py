@@ -24,8 +24,8 @@ def test_every_shipped_scenario_plans(path: Path) -> None:
     assert set(j) >= {"status", "objective", "solve_ms", "binaries", "rows", "columns", "plan", "rules"}
     assert j["status"] == "optimal"
     plan = np.array(j["plan"], float)
-    assert plan.shape == (11, 7)
-    assert np.allclose(np.diff(plan[:, 0]), 0.1)
+    assert plan.shape == (19, 7)  # the look-ahead: 10 steps of 0.1 s, then 8 of 0.5 s
+    assert np.allclose(np.diff(plan[:, 0]), [0.1] * 10 + [0.5] * 8)
     assert all(r["robustness"] == "inf" or r["robustness"] >= -1e-6 for r in j["rules"])
     assert j["solve_ms"]["total"] > 0
 

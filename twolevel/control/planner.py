@@ -16,7 +16,9 @@ One step of a planner::
   *excluding* the current step (may be None). ``history["delta"][-1]`` and ``history["a"][-1]``,
   when present, are the control applied in the last step.
 * :class:`PlanResult`: a :class:`PlanStatus`, the controls (H, 2) [δ rad, a m/s²] and states
-  (H+1, 4) [X, Y, ψ, v] of the plan, and the solver's figures.
+  (H+1, 4) [X, Y, ψ, v] of the plan over H periods dt (what the low level checks), the whole
+  plan over a longer look-ahead when the planner has one (:class:`LookAhead`), and the solver's
+  figures.
 
 The simulation engine (:mod:`twolevel.sim.engine`) calls planners only through
 :class:`Planner`; :mod:`twolevel.control.registry` makes one by the name a run chooses.
@@ -37,7 +39,7 @@ from twolevel.world.signals import StopMemory, update_stop_memory
 from twolevel.world.traffic import TrafficState
 from twolevel.world.world import World, load_rulesets
 
-__all__ = ["PlanStatus", "PlanResult", "EgoState", "Snapshot", "WorldState", "PreviousPlan", "Planner",
+__all__ = ["PlanStatus", "PlanResult", "LookAhead", "EgoState", "Snapshot", "WorldState", "PreviousPlan", "Planner",
            "planner_of_world", "stop_memory_of", "DETAILED_STATES"]
 
 DETAILED_STATES = 12
@@ -64,6 +66,23 @@ class PlanStatus(ValueEnum):
     def ok(self) -> bool:
         """A plan that satisfies the rules."""
         return self in (PlanStatus.OPTIMAL, PlanStatus.FEASIBLE)
+
+
+@dataclass(frozen=True, eq=False)
+class LookAhead:
+    """A plan over a look-ahead whose steps differ in length: ``periods`` (N,) (each step in
+    periods dt, the first H of one), ``dt`` [s], ``states`` (N+1, 4) [X, Y, ψ, v] and ``controls``
+    (N, 2) [δ rad, a m/s²] (held over each step)."""
+
+    periods: np.ndarray
+    dt: float
+    states: np.ndarray
+    controls: np.ndarray
+
+    @property
+    def times(self) -> np.ndarray:
+        """(N+1,) [s] from now."""
+        return self.dt * np.concatenate([[0], np.cumsum(self.periods)])
 
 
 @dataclass(frozen=True, eq=False)
@@ -103,6 +122,8 @@ class PlanResult:
     satisfies the rules, or :attr:`PlanStatus.TIME_LIMIT`); None when it did not fall back, when
     no solve ran (a rule could not be encoded), and for the NMPC (IPOPT's status is in
     ``message``)."""
+    look_ahead: LookAhead | None = None
+    """The whole plan when it looks further than ``states`` (None: ``states`` is all of it)."""
 
     @property
     def ok(self) -> bool:
@@ -153,26 +174,36 @@ WorldState = Union[TrafficState, Snapshot, None]
 
 @dataclass(frozen=True, eq=False)
 class PreviousPlan:
-    """The MPC's last plan: made at ``t`` [s], ``states`` (H+1, 4), ``controls`` (H, 2) [δ rad,
-    a m/s²], ``mode`` (choice per disjunction). The next step linearises about it shifted by one
-    step, seeds the mode search with it, and falls back to it."""
+    """The MPC's last plan: made at ``t`` [s], ``states`` (N+1, 4), ``controls`` (N, 2) [δ rad,
+    a m/s²] over its whole look-ahead, ``mode`` (choice per disjunction), ``periods`` (N,) its
+    steps in periods (None: N steps of one). The next step linearises about it shifted by one
+    period, seeds the mode search with it, and falls back to it."""
 
     t: float
     states: np.ndarray
     controls: np.ndarray
     mode: np.ndarray
+    periods: np.ndarray | None = None
 
-    def spans(self, H: int) -> bool:
-        """Whether it covers a horizon of ``H`` steps."""
-        return self.controls.shape[0] == H
+    def __post_init__(self) -> None:
+        if self.periods is None:
+            object.__setattr__(self, "periods", np.ones(len(self.controls), dtype=int))
 
-    def precedes(self, t: float, dt: float, H: int) -> bool:
-        """Whether it was made one period ``dt`` [s] before ``t`` [s] over ``H`` steps."""
-        return abs(t - self.t - dt) < 1e-6 and self.spans(H)
+    def spans(self, periods: int | tuple[int, ...] | np.ndarray) -> bool:
+        """Whether it covers the look-ahead of ``periods`` (per step; a number H: H steps of one)."""
+        want = np.ones(periods, dtype=int) if isinstance(periods, (int, np.integer)) else np.asarray(periods)
+        return self.controls.shape[0] == len(want) and bool(np.array_equal(self.periods, want))
+
+    def precedes(self, t: float, dt: float, periods: int | tuple[int, ...] | np.ndarray) -> bool:
+        """Whether it was made one period ``dt`` [s] before ``t`` [s] over the same look-ahead."""
+        return abs(t - self.t - dt) < 1e-6 and self.spans(periods)
 
     @classmethod
     def of(cls, t: float, res: PlanResult) -> "PreviousPlan":
-        return cls(t, res.states, res.controls, res.mode)
+        la = res.look_ahead
+        if la is None:
+            return cls(t, res.states, res.controls, res.mode)
+        return cls(t, la.states, la.controls, res.mode, np.asarray(la.periods))
 
 
 @runtime_checkable

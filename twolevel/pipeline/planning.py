@@ -40,8 +40,9 @@ __all__ = ["PlanReport", "plan_scenario", "explain_infeasibility"]
 @dataclass(frozen=True)
 class PlanReport:
     """What ``twolevel plan`` prints: status, objective, solve times [ms], model size, the plan
-    rows (t [s], X [m], Y [m], ψ [rad], v [m/s], δ [rad], a [m/s²]; the last state has no
-    control: δ, a repeat the last), each rule's robustness, and the conflicting rules if any."""
+    rows over the whole look-ahead (t [s], X [m], Y [m], ψ [rad], v [m/s], δ [rad], a [m/s²]; H
+    steps of dt, then the coarse steps; the last state has no control: δ, a repeat the last),
+    each rule's robustness, and the conflicting rules if any."""
 
     status: PlanStatus
     objective: float
@@ -160,7 +161,7 @@ def plan_scenario(
         return None, diags
     world = build_world(scn)
     ws = world.settings
-    settings = MPCSettings(H=ws.H, dt=ws.dt, solver=solver, time_limit=time_limit)
+    settings = MPCSettings.of_world(ws, solver=solver, time_limit=time_limit)
     ctrl, d2 = HighLevelController.from_world(world, settings)
     diags += d2
     if ctrl is None:
@@ -209,9 +210,12 @@ def plan_scenario(
             emitted = str(emit)
         except OSError as e2:
             diags.append(MIL514(f"cannot write {emit}: {e2}", span))
-    H, dt = ctrl.settings.H, ctrl.settings.dt
-    controls = np.vstack([res.controls, res.controls[-1:]])
-    plan = tuple((t0 + k * dt, *map(float, res.states[k]), *map(float, controls[k])) for k in range(H + 1))
+    st = ctrl.settings
+    la = res.look_ahead  # the whole look-ahead: the fine steps, then the coarse ones
+    times, states, u = (t0 + la.times, la.states, la.controls) if la is not None else \
+        (t0 + st.dt * np.arange(st.H + 1), res.states, res.controls)
+    controls = np.vstack([u, u[-1:]])
+    plan = tuple((float(times[k]), *map(float, states[k]), *map(float, controls[k])) for k in range(len(times)))
     report = PlanReport(res.status, res.cost, dict(res.timings_ms), res.binaries, res.rows, res.columns, plan,
                         tuple(res.rule_robustness.items()), solver, res.qps, res.certified, conflicts, res.message,
                         emitted)

@@ -28,9 +28,13 @@ from twolevel.world.codes import (
 from twolevel.world.document import Document, Path_, read_document
 from twolevel.world.layout import check_layout, lane_lengths
 from twolevel.world.parameters import check_variants, explain, substitute
-from twolevel.world.schema import MAX_ROUTE_POINTS, MapFile, ParameterDeclarations, ScenarioFile
+from twolevel.world.schema import DEFAULT_SENSOR_RANGE, MAX_ROUTE_POINTS, MapFile, ParameterDeclarations, ScenarioFile
 
-__all__ = ["Map", "Scenario", "RuleFile", "load_map", "load_scenario", "check_world_file", "file_kind"]
+if typing.TYPE_CHECKING:
+    from twolevel.world.assumptions import ResponseBounds
+
+__all__ = ["Map", "Scenario", "RuleFile", "Sensing", "load_map", "load_scenario", "check_world_file", "file_kind",
+           "sensing_of"]
 
 
 @dataclass(frozen=True)
@@ -447,6 +451,38 @@ def _check_scenario(spec: ScenarioFile, doc: Document, m: MapFile) -> list[Diagn
                           hint="a run lasts at least dt"))
     out += _check_assumptions(spec, doc, [i for i, _ in ids[1:]])
     return out
+
+
+@dataclass(frozen=True)
+class Sensing:
+    """What the ego can see and stop for (one definition for ``twolevel check``, the world's
+    signals and the MPC): its RSS ``response`` as the rear car — its response time (``controller.
+    rss_response``, default one period dt), its largest acceleration during it (the bicycle's
+    ``a_max`` with the ego's overrides), its braking ``controller.rss_brake`` and the assumed
+    ``brake_max`` of the vehicle ahead (:mod:`twolevel.world.assumptions`) —, the sensing
+    ``range`` [m] (``controller.sensor_range``, default the larger of
+    :data:`~twolevel.world.schema.DEFAULT_SENSOR_RANGE` and r_near), the ``margin`` [m] it keeps at
+    standstill (``controller.D_safe``) and ``v_bound`` [m/s], the speed from which it stops (RSS's
+    distance to a standing vehicle, plus the margin) behind a standing car of its own length whose
+    centre is just beyond the range."""
+
+    response: "ResponseBounds"
+    range: float
+    margin: float
+    v_bound: float
+
+
+def sensing_of(spec: ScenarioFile) -> Sensing:
+    """The ego's :class:`Sensing` under a scenario's settings (pure Python)."""
+    from twolevel.models.params import BicycleParams
+    from twolevel.world.assumptions import ResponseBounds, from_spec, stopping_speed
+
+    c = spec.controller
+    a_max = float(spec.ego.vehicle.get("a_max", BicycleParams.a_max))
+    response = ResponseBounds(c.dt if c.rss_response is None else c.rss_response, a_max, c.rss_brake,
+                              from_spec(spec.assumptions).response.brake_max)
+    rng = max(DEFAULT_SENSOR_RANGE, c.r_near) if c.sensor_range is None else c.sensor_range
+    return Sensing(response, rng, c.D_safe, stopping_speed(rng - spec.ego.box.length - c.D_safe, response))
 
 
 def _check_assumptions(spec: ScenarioFile, doc: Document, known: list[str]) -> list[Diagnostic]:

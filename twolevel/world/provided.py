@@ -18,6 +18,8 @@ d_lead        m      bumper-to-bumper gap to the nearest vehicle ahead in the eg
 v_lead        m/s    that vehicle's speed along the route (= v if none)
 min_gap       m      oriented-box separation to the nearest vehicle within r_near (+inf if none)
 n_near        -      number of vehicles within r_near
+rss_gap       m      gap to the nearest vehicle ahead in the ego's lane within the sensing range,
+                     beyond RSS's safe distance behind it (+inf if none)
 ============  =====  ===============================================================
 
 Timing convention (the one place it is stated): sample k of a trace is the state at time k·dt
@@ -30,7 +32,7 @@ which is also the u_{-1} of the cost term ‖u_0 − u_{-1}‖²) all follow it.
 from __future__ import annotations
 
 SIGNALS: tuple[str, ...] = ("x", "y", "psi", "v", "a", "delta", "s", "e", "v_max", "d_stop", "light_red",
-                            "d_light", "d_lead", "v_lead", "min_gap", "n_near")
+                            "d_light", "d_lead", "v_lead", "min_gap", "n_near", "rss_gap")
 """Every signal the world provides, in the order of the table above (the one list of their names:
 the simulator's history and trace columns follow this order)."""
 

@@ -28,13 +28,18 @@ __all__ = [
     "Arc", "Segment", "StartPose", "LaneSpec", "Road", "SpeedLimitSign", "StopSign", "LightCycle",
     "LightStep", "TrafficLight", "MapFile", "LanePos", "Placement", "Box", "Ego", "RouteSpec",
     "IDMParams", "Waypoint", "Participant", "Population", "RuleRef", "ControllerSettings",
-    "RunSettings", "ScenarioFile", "KMH", "Number", "Count", "COORD_MAX",
+    "RunSettings", "ScenarioFile", "KMH", "Number", "Count", "COORD_MAX", "DEFAULT_SENSOR_RANGE",
     "TIME_MAX", "CONST_MAX", "SEED_MAX", "S_MAX", "MIN_PIECE", "MIN_SPACING", "MAX_ROUTE_POINTS",
     "UserBoundsSpec", "PedestrianBoundsSpec", "ResponseSpec", "AssumptionsSpec",
     "GoalCriterion", "RoadCriterion", "Expect", "NormalDist", "Parameter", "ParameterDeclarations", "Variant",
 ]
 
 KMH = 1.0 / 3.6  # [m/s] per km/h
+DEFAULT_SENSOR_RANGE = 100.0
+"""[m] How far the ego senses the vehicles ahead by default (``controller.sensor_range``): the
+detection range of an automotive camera, short of radar's 150–250 m. From 27 m/s (97 km/h) the
+ego stops within it at RSS's 4 m/s², so the paper's scenarios (at most 14 m/s) sense far more
+than they need; a faster scenario gets a ``twolevel check`` warning (YML431)."""
 IDM_V0_MAX = 120.0 * KMH  # [m/s] Treiber's desired speed, capped further by the lane's limit
 COORD_MAX = 1e6  # [m] largest |x|, |y| of any point (a map 2000 km across)
 TIME_MAX = 86_400.0  # [s] latest time in a light's script or a participant's waypoints (a day)
@@ -371,6 +376,19 @@ class ControllerSettings(_Model):
     solver: Literal["modes", "highs"] = Field(default="modes", description="'modes' (mode search, Clarabel) or 'highs' (MILP)")
     stop_speed: Number = Field(default=0.1, gt=0, le=5, description="speed counted as standing still [m/s]")
     yellow_decel: Number = Field(default=3.0, gt=0, le=15, description="deceleration that decides 'can stop at yellow' [m/s²]")
+    horizon_s: Number | None = Field(default=None, gt=0, le=30,
+                                     description="MPC look-ahead [s]: H steps of dt, then coarse steps (default 5 s)")
+    coarse_dt: Number | None = Field(default=None, gt=0, le=10,
+                                     description="length of each coarse step after the first H [s] (default 5·dt)")
+    coarse_steps: list[Annotated[Number, Field(gt=0, le=10)]] | None = Field(
+        default=None, max_length=50, description="the coarse steps' lengths [s], each a whole number of dt")
+    sensor_range: Number | None = Field(default=None, gt=0, le=1000,
+                                        description="how far the ego senses vehicles ahead [m] (default max(100, r_near))")
+    rss: bool = Field(default=True, description="plan to keep RSS's safe distance behind the vehicle ahead")
+    rss_brake: Number = Field(default=4.0, gt=0, le=15,
+                              description="the ego's braking in its RSS distance and sensing speed bound [m/s²]")
+    rss_response: Number | None = Field(default=None, ge=0, le=5,
+                                        description="the ego's response time in its RSS distance [s] (default dt)")
 
 
 class RunSettings(_Model):

@@ -13,7 +13,8 @@ written for the closed loop:
 Other vehicles are :class:`Others`: their poses over the same T samples (the actual traffic for
 the current step; constant-velocity predictions over the horizon for the low level, as
 :func:`~twolevel.world.signals.horizon_constants` predicts them for the MPC). Sensing is limited
-to ``r_near`` [m] at every sample. Units: m, rad, m/s, s.
+to ``r_near`` [m] at every sample, but for ``rss_gap``'s vehicle ahead, sensed within the sensing
+range. Units: m, rad, m/s, s.
 """
 
 from __future__ import annotations
@@ -23,7 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from twolevel.models.obb import pose_separation
-from twolevel.world.signals import PASS_MARGIN, STOP_ZONE, StopMemory, update_stop_memory
+from twolevel.world.signals import (PASS_MARGIN, STOP_ZONE, StopMemory, ahead_in_lane, rss_gap, sensing_window,
+                                    update_stop_memory)
 from twolevel.world.traffic import RED, YELLOW, TrafficState
 from twolevel.world.world import World
 
@@ -61,7 +63,10 @@ class Memory:
 class Others:
     """n other vehicles over T samples: centres ``x``/``y`` (n, T) [m], heading ``psi`` (n, T)
     [rad], speed ``v`` (n, T) [m/s], route coordinates ``s``/``e`` (n, T) [m], boxes ``length``/
-    ``width`` (n,) [m] and their participant ``index`` (n,)."""
+    ``width`` (n,) [m] and their participant ``index`` (n,). Sample 0 is when they were sensed
+    (now): a vehicle counts for the signals of the neighbourhood (``d_lead``, ``min_gap``,
+    ``n_near``) at the samples where it is within ``r_near`` of the ego and was at sample 0; the
+    vehicle ahead sensed beyond r_near (:func:`others_now`) is there for ``rss_gap``."""
 
     x: np.ndarray
     y: np.ndarray
@@ -92,13 +97,28 @@ def _others(world: World, idx: np.ndarray, x: np.ndarray, y: np.ndarray, psi: np
 
 
 def others_now(world: World, traffic: TrafficState, x: float, y: float, s0: float) -> Others:
-    """The vehicles within ``r_near`` of the ego at (x, y) [m] now (T = 1); ``s0`` [m] is the
-    ego's route position (where their projections are searched)."""
-    r_near = world.settings.r_near
-    idx = np.flatnonzero(traffic.active & (np.hypot(traffic.x - x, traffic.y - y) <= r_near))
-    col = lambda a: a[idx][:, None]  # noqa: E731
-    return _others(world, idx, col(traffic.x), col(traffic.y), col(traffic.psi), col(traffic.v), np.array([s0]),
-                   r_near + 5.0)
+    """The vehicles within ``r_near`` of the ego at (x, y) [m] now (T = 1), and beyond it the
+    nearest vehicle ahead in the ego's lane within the sensing range (``rss_gap``'s); ``s0`` [m]
+    is the ego's route position (where their projections are searched)."""
+    st = world.settings
+    dist = np.hypot(traffic.x - x, traffic.y - y)
+    idx = np.flatnonzero(traffic.active & (dist <= st.r_near))
+    col = lambda a, i: a[i][:, None]  # noqa: E731
+    now = _others(world, idx, col(traffic.x, idx), col(traffic.y, idx), col(traffic.psi, idx), col(traffic.v, idx),
+                  np.array([s0]), st.r_near + 5.0)
+    far = np.flatnonzero(traffic.active & (dist > st.r_near) & (dist <= st.sensor_range))
+    if not len(far):
+        return now
+    out = _others(world, far, col(traffic.x, far), col(traffic.y, far), col(traffic.psi, far), col(traffic.v, far),
+                  np.array([s0]), sensing_window(world))
+    _, e0 = world.route.project_near(np.array([[x, y]]), np.array([s0]), 5.0)
+    mask, _ = ahead_in_lane(world.route, out.s[:, 0], out.e[:, 0], out.psi[:, 0], s0, float(e0[0]))
+    if not mask.any():
+        return now
+    j = np.flatnonzero(mask)[np.argmin(out.s[mask, 0])]
+    cat = lambda a, b: np.concatenate([a, b[[j]]])  # noqa: E731
+    return Others(*(cat(getattr(now, f), getattr(out, f)) for f in ("x", "y", "psi", "v", "s", "e", "length", "width",
+                                                                       "index")))
 
 
 def others_predicted(world: World, traffic: TrafficState, x: float, y: float, s0: float, H: int,
@@ -219,22 +239,28 @@ def _lead_and_gap(world: World, others: Others, x: np.ndarray, y: np.ndarray, ps
                   e: np.ndarray, v: np.ndarray) -> dict[str, np.ndarray]:
     K, T = x.shape
     out = {"d_lead": np.full((K, T), np.inf), "v_lead": v.astype(float).copy(), "min_gap": np.full((K, T), np.inf),
-           "n_near": np.zeros((K, T))}
+           "n_near": np.zeros((K, T)), "rss_gap": np.full((K, T), np.inf)}
     if others.n == 0:
         return out
+    st = world.settings
     ox, oy = others.x.T[None], others.y.T[None]  # (1, T, n)
     dist = np.hypot(ox - x[..., None], oy - y[..., None])  # (K, T, n)
-    near = dist <= world.settings.r_near
+    near = (dist <= st.r_near) & (dist[:, :1] <= st.r_near)  # within r_near here, and when sensed
     out["n_near"] = near.sum(axis=-1).astype(float)
     route = world.route
-    si, ei = others.s.T[None], others.e.T[None]
-    along = np.cos(others.psi.T - route.heading_at(others.s.T))[None]  # (1, T, n)
-    lead = near & (si > s[..., None]) & (np.abs(ei - e[..., None]) < route.width_at(others.s.T)[None] / 2) & (along > 0)
-    gap = np.where(lead, si - s[..., None] - (world.ego.length + others.length) / 2, np.inf)
-    best = gap.argmin(axis=-1)[..., None]
-    d_lead = np.take_along_axis(gap, best, axis=-1)[..., 0]
-    v_other = np.broadcast_to(others.v.T[None] * along, gap.shape)
-    out["d_lead"] = d_lead
-    out["v_lead"] = np.where(np.isfinite(d_lead), np.take_along_axis(v_other, best, axis=-1)[..., 0], v)
+    ahead, along = ahead_in_lane(route, others.s.T[None], others.e.T[None], others.psi.T[None], s[..., None],
+                                 e[..., None])  # (K, T, n), (1, T, n)
+    v_other = np.broadcast_to(others.v.T[None] * along, dist.shape)
+    bumper = others.s.T[None] - s[..., None] - (world.ego.length + others.length) / 2
+    for name, mask in (("d_lead", ahead & near), ("rss_gap", ahead & (dist <= st.sensor_range))):
+        gap = np.where(mask, bumper, np.inf)
+        best = gap.argmin(axis=-1)[..., None]
+        g = np.take_along_axis(gap, best, axis=-1)[..., 0]
+        v_front = np.take_along_axis(v_other, best, axis=-1)[..., 0]
+        if name == "d_lead":
+            out["d_lead"] = g
+            out["v_lead"] = np.where(np.isfinite(g), v_front, v)
+        else:
+            out["rss_gap"] = rss_gap(g, v, v_front, st.response)
     out["min_gap"] = min_box_gap(x, y, psi, world.ego.length, world.ego.width, others, near, dist)
     return out

@@ -28,22 +28,30 @@ Definitions (sensing is limited to ``r_near``):
   in the ego's lane (|e_i − e| < lane width / 2) and heading the same way, the nearest: bumper-to-
   bumper gap s_i − s − (L_ego + L_i)/2 and its speed along the route. +inf / v if none.
 * ``min_gap``: signed oriented-box separation to the nearest vehicle within r_near (+inf if none).
+* ``rss_gap``: the vehicle ahead as for ``d_lead`` but within the sensing range
+  (``settings.sensor_range`` ≥ r_near, what the ego must be able to stop for), its bumper-to-bumper
+  gap less RSS's safe distance behind it with the ego as the rear car
+  (:func:`twolevel.world.assumptions.safe_distance` with ``settings.response``:
+  :class:`~twolevel.world.loader.Sensing`) — ≥ 0 when the ego can stop behind it whatever it does
+  within the assumptions. +inf if none.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Mapping, Sequence
 
 import numpy as np
 
 from twolevel.models.obb import box_corners, box_separation
+from twolevel.world.assumptions import ResponseBounds, safe_distance
+from twolevel.world.geometry import Route
 from twolevel.world.provided import PROVIDED_SIGNALS
 from twolevel.world.traffic import RED, YELLOW, TrafficState
 from twolevel.world.world import World
 
 __all__ = ["PASS_MARGIN", "STOP_ZONE", "TrafficLog", "StopMemory", "HorizonConstants", "signals_along",
-           "horizon_constants", "update_stop_memory"]
+           "horizon_constants", "update_stop_memory", "ahead_in_lane", "rss_gap", "sensing_window"]
 
 PASS_MARGIN = 5.0  # [m] how far past a stop line it still counts (so running it is visible)
 STOP_ZONE = 3.0  # [m] a stop counts for a stop sign when made at most this far before its line
@@ -130,35 +138,68 @@ def _light(world: World, t: np.ndarray, s: np.ndarray, v: np.ndarray) -> tuple[n
     return red, d_light
 
 
+def sensing_window(world: World) -> float:
+    """[m] How far along the route a sensed vehicle is searched from the ego's position: twice
+    the sensing range and 5 m (on a bending road the way along it is longer than the straight
+    distance within which the vehicle is sensed)."""
+    st = world.settings
+    return 2.0 * max(st.sensor_range, st.r_near) + 5.0
+
+
+def ahead_in_lane(route: Route, s_i: np.ndarray, e_i: np.ndarray, psi_i: np.ndarray, s: np.ndarray | float,
+                  e: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+    """Which vehicles at route coordinates ``s_i``, ``e_i`` [m] with heading ``psi_i`` [rad] are
+    *ahead in the ego's lane* for an ego at ``s``, ``e`` [m] (broadcast): projected ahead, within
+    half a lane width of the ego's lateral offset, heading the route's way; and the cosine of
+    their heading to the route's (their speed's share along it)."""
+    along = np.cos(psi_i - route.heading_at(s_i))
+    return (s_i > s) & (np.abs(e_i - e) < route.width_at(s_i) / 2) & (along > 0), along
+
+
+def rss_gap(gap: np.ndarray, v: np.ndarray, v_front: np.ndarray, response: ResponseBounds) -> np.ndarray:
+    """The ``rss_gap`` signal [m]: a bumper-to-bumper ``gap`` [m] to the vehicle ahead (+inf: none)
+    less RSS's safe distance of an ego at ``v`` [m/s] behind it at ``v_front`` [m/s] (broadcast)."""
+    gap = np.asarray(gap, dtype=float)
+    d = safe_distance(np.asarray(v, dtype=float), np.asarray(v_front, dtype=float), response)
+    return np.where(np.isfinite(gap), gap - d, np.inf)
+
+
 def _others(world: World, traffic: TrafficLog | None, x: np.ndarray, y: np.ndarray, psi: np.ndarray, s: np.ndarray,
             e: np.ndarray, v: np.ndarray) -> dict[str, np.ndarray]:
     n = len(s)
     out = {"d_lead": np.full(n, np.inf), "v_lead": v.astype(float).copy(), "min_gap": np.full(n, np.inf),
-           "n_near": np.zeros(n)}
+           "n_near": np.zeros(n), "rss_gap": np.full(n, np.inf)}
     if traffic is None or traffic.x.shape[1] == 0:
         return out
-    r_near = world.settings.r_near
+    st = world.settings
     dist = np.hypot(traffic.x - x[:, None], traffic.y - y[:, None])
-    near = traffic.active & (dist <= r_near)
+    seen = traffic.active & (dist <= max(st.sensor_range, st.r_near))
+    near = traffic.active & (dist <= st.r_near)
     out["n_near"] = near.sum(axis=1).astype(float)
-    k, i = np.nonzero(near)
+    k, i = np.nonzero(seen)
     if len(k) == 0:
         return out
     route = world.route
-    si, ei = route.project_near(np.stack([traffic.x[k, i], traffic.y[k, i]], axis=1), s[k], r_near + 5.0)
-    rh = route.heading_at(si)
-    along = np.cos(traffic.psi[k, i] - rh)
-    lead = (si > s[k]) & (np.abs(ei - e[k]) < route.width_at(si) / 2) & (along > 0)
+    si, ei = route.project_near(np.stack([traffic.x[k, i], traffic.y[k, i]], axis=1), s[k],
+                                sensing_window(world))
+    ahead, along = ahead_in_lane(route, si, ei, traffic.psi[k, i], s[k], e[k])
     gap = si - s[k] - (world.ego.length + traffic.length[i]) / 2
-    g = np.full(near.shape, np.inf)
-    g[k[lead], i[lead]] = gap[lead]
-    best = g.argmin(axis=1)
     r = np.arange(n)
-    has = np.isfinite(g[r, best])
-    out["d_lead"] = np.where(has, g[r, best], np.inf)
-    vl = np.zeros(near.shape)
+    vl = np.zeros(seen.shape)
     vl[k, i] = traffic.v[k, i] * along
-    out["v_lead"] = np.where(has, vl[r, best], v)
+    for name, mask in (("rss_gap", ahead), ("d_lead", ahead & near[k, i])):
+        g = np.full(seen.shape, np.inf)
+        g[k[mask], i[mask]] = gap[mask]
+        best = g.argmin(axis=1)
+        has = np.isfinite(g[r, best])
+        if name == "rss_gap":
+            out[name] = rss_gap(g[r, best], v, vl[r, best], st.response)
+        else:
+            out["d_lead"] = np.where(has, g[r, best], np.inf)
+            out["v_lead"] = np.where(has, vl[r, best], v)
+    k, i = np.nonzero(near)
+    if len(k) == 0:
+        return out
     sep = box_separation(box_corners(x[k], y[k], psi[k], world.ego.length, world.ego.width),
                          box_corners(traffic.x[k, i], traffic.y[k, i], traffic.psi[k, i], traffic.length[i],
                                      traffic.width[i]))
@@ -198,7 +239,8 @@ def signals_along(
 
 @dataclass(frozen=True, eq=False)
 class HorizonConstants:
-    """What is known at solve time over steps k = 0..H (times ``t`` (H+1,) [s]).
+    """What is known at solve time over steps k = 0..H (times ``t`` (H+1,) [s]; the steps may
+    differ in length, :func:`horizon_constants`).
 
     ``s_ref`` (H+1,) [m]: predicted route positions used for the lookups; ``v_max`` (H+1,) [m/s]
     there. ``s_stop`` [m]: route position of the stop line that applies (+inf if none within
@@ -208,7 +250,11 @@ class HorizonConstants:
     (n, H+1) [rad], boxes ``length``/``width`` (n,) [m], speeds ``v`` (n,) [m/s]. ``lead`` is the
     row of the vehicle ahead in the ego's lane (−1 if none), ``s_lead`` (H+1,) [m] its predicted
     route position (centre) and ``lead_offset`` [m] = (L_ego + L_lead)/2, so that
-    d_lead,k = s_lead,k − s_k − lead_offset.
+    d_lead,k = s_lead,k − s_k − lead_offset. ``ahead`` is the participant index of the vehicle ahead
+    in the ego's lane within the sensing range (−1 if none; ``lead``'s vehicle when that is within
+    r_near), ``s_ahead`` (H+1,) [m] its predicted route position, ``v_ahead`` [m/s] its speed along
+    the route, ``e_ahead`` [m] its lateral offset from the route and ``ahead_offset`` [m] =
+    (L_ego + L_ahead)/2 (``rss_gap``'s vehicle).
     """
 
     t: np.ndarray
@@ -226,19 +272,26 @@ class HorizonConstants:
     lead: int
     s_lead: np.ndarray
     lead_offset: float
+    ahead: int = -1
+    s_ahead: np.ndarray = field(default_factory=lambda: np.full(1, np.inf))
+    v_ahead: float = 0.0
+    ahead_offset: float = 0.0
+    e_ahead: float = 0.0
 
 
 def horizon_constants(
     world: World, traffic: TrafficState, t0: float, ego: Sequence[float], *, H: int | None = None,
     dt: float | None = None, s_pred: np.ndarray | None = None, memory: StopMemory | None = None,
-    station: tuple[float, float] | None = None,
+    station: tuple[float, float] | None = None, ticks: np.ndarray | None = None,
 ) -> HorizonConstants:
     """The solve-time constants over the horizon from the ego state ``ego`` = (x, y, psi, v)
-    [m, m, rad, m/s] at time ``t0`` [s]. ``s_pred`` (H+1,) [m]: the predicted route positions
-    (e.g. the shifted previous plan's); default: the route's reference advance from the ego's
-    position. ``memory``: which stop lines are served (default: none). ``station`` = (s, e) [m]:
-    the ego's route position and lateral offset when the caller has already projected it
-    (default: projected here onto the whole route)."""
+    [m, m, rad, m/s] at time ``t0`` [s]: H steps of ``dt`` [s] (default the world's), or at
+    the times t0 + dt·``ticks`` of a horizon whose steps differ (``ticks`` (N+1,): whole periods
+    from now, 0 first). ``s_pred`` (H+1,) [m]: the predicted route positions (e.g. the shifted
+    previous plan's; needed with ``ticks``); default: the route's reference advance from the
+    ego's position. ``memory``: which stop lines are served (default: none). ``station`` =
+    (s, e) [m]: the ego's route position and lateral offset when the caller has already
+    projected it (default: projected here onto the whole route)."""
     H = world.settings.H if H is None else H
     dt = world.settings.dt if dt is None else dt
     x, y, psi, v = (float(c) for c in ego[:4])
@@ -248,7 +301,10 @@ def horizon_constants(
         s_at, e_at = route.local_coordinates(np.array([[x, y]]))
         station = (float(s_at[0]), float(e_at[0]))
     s0, e0 = float(station[0]), float(station[1])
-    t = t0 + dt * np.arange(H + 1)
+    ticks = np.arange(H + 1) if ticks is None else np.asarray(ticks)
+    H = len(ticks) - 1
+    tau = dt * ticks
+    t = t0 + tau
     if s_pred is None:
         s_pred, _ = route.reference(s0, v, H, dt)
     v_max = route.limit_at(s_pred).astype(float)
@@ -268,18 +324,29 @@ def horizon_constants(
         can_stop = dl[j] >= v**2 / (2 * world.settings.yellow_decel)
         light_red = ((states == RED) | ((states == YELLOW) & can_stop)).astype(float)
     # other vehicles within r_near, constant velocity
-    near = np.flatnonzero(traffic.active & (np.hypot(traffic.x - x, traffic.y - y) <= r_near))
+    dist = np.hypot(traffic.x - x, traffic.y - y)
+    near = np.flatnonzero(traffic.active & (dist <= r_near))
     vel = traffic.v[near, None] * np.stack([np.cos(traffic.psi[near]), np.sin(traffic.psi[near])], axis=1)
-    xy = traffic.xy[near][:, None, :] + vel[:, None, :] * (dt * np.arange(H + 1))[None, :, None]
+    xy = traffic.xy[near][:, None, :] + vel[:, None, :] * tau[None, :, None]
     lead, s_lead, lead_offset = -1, np.full(H + 1, np.inf), 0.0
-    if len(near):
-        si, ei = route.project_near(traffic.xy[near], np.full(len(near), s0), r_near + 5.0)
-        along = np.cos(traffic.psi[near] - route.heading_at(si))
-        ahead = (si > s0) & (np.abs(ei - e0) < route.width_at(si) / 2) & (along > 0)
-        if ahead.any():
-            lead = int(np.flatnonzero(ahead)[np.argmin(np.where(ahead, si, np.inf)[ahead])])
-            s_lead = si[lead] + traffic.v[near[lead]] * along[lead] * dt * np.arange(H + 1)
-            lead_offset = (world.ego.length + float(world.parts.length[near[lead]])) / 2
+    # the vehicle ahead within the sensing range (lead's, when that is within r_near)
+    rng = max(world.settings.sensor_range, r_near)
+    seen = np.flatnonzero(traffic.active & (dist <= rng))
+    ahead, s_ahead, v_ahead, ahead_offset, e_ahead = -1, np.full(H + 1, np.inf), 0.0, 0.0, 0.0
+    if len(seen):
+        si, ei = route.project_near(traffic.xy[seen], np.full(len(seen), s0), sensing_window(world))
+        mask, along = ahead_in_lane(route, si, ei, traffic.psi[seen], s0, e0)
+        if mask.any():
+            j = int(np.flatnonzero(mask)[np.argmin(si[mask])])
+            ahead = int(seen[j])
+            v_ahead = float(traffic.v[ahead] * along[j])
+            s_ahead = si[j] + v_ahead * dt * ticks
+            ahead_offset = (world.ego.length + float(world.parts.length[ahead])) / 2
+            e_ahead = float(ei[j])
+            if dist[ahead] <= r_near:
+                lead = int(np.searchsorted(near, ahead))
+                s_lead, lead_offset = s_ahead, ahead_offset
     return HorizonConstants(t, np.asarray(s_pred, dtype=float), v_max, s_stop, s_light, light_red, near, xy,
                             np.repeat(traffic.psi[near, None], H + 1, axis=1), world.parts.length[near],
-                            world.parts.width[near], traffic.v[near], lead, s_lead, lead_offset)
+                            world.parts.width[near], traffic.v[near], lead, s_lead, lead_offset, ahead, s_ahead,
+                            v_ahead, ahead_offset, e_ahead)

@@ -14,9 +14,9 @@ from typing import Mapping
 
 import numpy as np
 
-from twolevel.world.assumptions import Assumptions, from_spec
+from twolevel.world.assumptions import RSS_BOUNDS, Assumptions, ResponseBounds, from_spec
 from twolevel.world.geometry import Lane, LaneSet, Route, concatenate, lane_from_reference, resample, sample_road
-from twolevel.world.loader import Scenario, _route_lanes, successors
+from twolevel.world.loader import Scenario, _route_lanes, sensing_of, successors
 from twolevel.world.schema import ControllerSettings, IDMParams, MapFile, Placement, Population
 from twolevel.world.traffic import (
     CONSTANT_VELOCITY, GREEN, IDM, RED, SCRIPTED, STATIONARY, YELLOW, Lights, Participants, SpeedLimits,
@@ -58,6 +58,23 @@ class Settings:
     yellow_decel: float
     duration: float
     seed: int
+    horizon_s: float | None = None
+    """[s] The MPC's look-ahead (None: the default of :mod:`twolevel.control.high_level.settings`)."""
+    coarse_dt: float | None = None
+    """[s] Its coarse steps' length (None: the default)."""
+    coarse_steps: tuple[float, ...] | None = None
+    """[s] Its coarse steps, explicitly."""
+    rss: bool = True
+    """The MPC plans to keep RSS's distance behind the vehicle ahead."""
+    sensor_range: float = 100.0
+    """[m] How far the ego senses: vehicles ahead for RSS's distance (the ``rss_gap`` signal, the
+    MPC's rows) and the speed it can stop from (:class:`~twolevel.world.loader.Sensing`); the
+    safety layer's participants. The MPC constrains only the vehicles within ``r_near``."""
+    response: ResponseBounds = RSS_BOUNDS
+    """RSS's response with the ego as the rear car (:class:`~twolevel.world.loader.Sensing`)."""
+    v_sense: float = math.inf
+    """[m/s] The speed from which the ego stops within its sensing range (D_safe short of a
+    standing car just beyond it)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -249,8 +266,11 @@ def build_world(scn: Scenario) -> World:
     traffic0 = TrafficState(0.0, col("x"), col("y"), col("psi"), col("v"), col("lane", int), col("s"), col("lat"),
                             np.ones(n, dtype=bool), np.zeros(n), np.full(n, -1, dtype=int))
     c: ControllerSettings = spec.controller
+    sense = sensing_of(spec)
     settings = Settings(c.H, c.dt, c.r_near, c.r, c.D_safe, c.samples, c.time_limit, c.solver, c.stop_speed,
-                        c.yellow_decel, spec.run.duration, spec.run.seed)
+                        c.yellow_decel, spec.run.duration, spec.run.seed, c.horizon_s, c.coarse_dt,
+                        None if c.coarse_steps is None else tuple(c.coarse_steps), c.rss, sense.range, sense.response,
+                        sense.v_bound)
     ego = EgoStart(ex, ey, epsi, spec.ego.speed, spec.ego.box.length, spec.ego.box.width,
                    MappingProxyType(dict(spec.ego.vehicle)))
     rs = route.from_lane(stops.lane, stops.s)

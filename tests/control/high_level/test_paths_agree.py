@@ -27,8 +27,10 @@ def test_mode_search_to_completion_and_highs_agree(tmp_path, seed: int) -> None:
         assert exact.status == highs.status == "fallback" and exact.certified
         return
     assert exact.status == highs.status == "optimal" and exact.certified
-    # the B&B is exact for the quadratic cost: never worse than the L1-selected mode's QP
-    assert exact.cost <= highs.cost * (1 + 1e-6) + 1e-6
+    # the B&B is exact for the quadratic cost, within its gap (bnb_gap = 1e-4, relative): never
+    # worse than the L1-selected mode's QP by more (mirror-image plans, passing left or right,
+    # can differ by less)
+    assert exact.cost <= highs.cost * (1 + 1e-4) + 1e-6
     # and the two reach the same optimum within tolerance; a recovering step (a rule already
     # violated now, required from a later step) is a harder instance for the L1 mode selection
     # (seed 2: 2.3 % above the exact optimum)

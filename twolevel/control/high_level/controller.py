@@ -46,8 +46,8 @@ from twolevel.control.high_level.rules import MpcRule, mpc_rules
 from twolevel.control.high_level.settings import MPCSettings
 from twolevel.control.high_level.solvers import Attempt, solve_path
 from twolevel.control.high_level.template import TemplateCache, refresh, template_of
-from twolevel.control.planner import (EgoState, PlanResult, PlanStatus, PreviousPlan, Snapshot, WorldState,
-                                      planner_of_world, stop_memory_of)
+from twolevel.control.planner import (EgoState, LookAhead, PlanResult, PlanStatus, PreviousPlan, Snapshot,
+                                      WorldState, planner_of_world, stop_memory_of)
 from twolevel.diagnostics import Diagnostic, Span
 from twolevel.milp.model import PatternCache
 from twolevel.milp.solution import Status
@@ -81,7 +81,7 @@ class HighLevelController:
     def __init__(self, world: World, rulesets: Sequence[RuleSet], settings: MPCSettings | None = None, *,
                  params: BicycleParams | None = None) -> None:
         self.world = world
-        self.settings = settings or MPCSettings(H=world.settings.H, dt=world.settings.dt)
+        self.settings = settings or MPCSettings.of_world(world.settings)
         self.params = params or BicycleParams()
         self.path = solve_path(self.settings, world.route)
         self.rules: list[MpcRule]
@@ -98,8 +98,8 @@ class HighLevelController:
     def from_world(cls, world: World, settings: MPCSettings | None = None, *, solver: str | None = None,
                    params: BicycleParams | None = None) -> tuple["HighLevelController | None", list[Diagnostic]]:
         """The controller of a scenario's world with its own rule files and settings."""
-        st = settings or MPCSettings(H=world.settings.H, dt=world.settings.dt, solver=solver or world.settings.solver,
-                                     time_limit=world.settings.time_limit, stop_decel=world.settings.yellow_decel)
+        st = settings or MPCSettings.of_world(world.settings, solver=solver or world.settings.solver,
+                                              time_limit=world.settings.time_limit, stop_decel=world.settings.yellow_decel)
         if solver is not None:
             st = replace(st, solver=solver)
         return planner_of_world(cls, world, st, params)
@@ -128,12 +128,12 @@ class HighLevelController:
                 history: Mapping[str, np.ndarray] | None, about: str = "plan"
                 ) -> tuple[StepData, dict[str, np.ndarray], int]:
         """Linearise and gather the step's constants; returns (step data, past samples, P)."""
-        H, dt = self.settings.H, self.settings.dt
+        dt = self.settings.dt
         snap = Snapshot.of(world_state)
         hist = {k: np.asarray(v, float) for k, v in (history or {}).items()}
         memory = stop_memory_of(self.world, snap.memory, hist, dt)
         prev = self.carry.previous
-        if prev is not None and not prev.precedes(t, dt, H):
+        if prev is not None and not prev.precedes(t, dt, self.settings.periods):
             prev = None
         u_prev = None
         if "delta" in hist and "a" in hist and len(hist["delta"]) and len(hist["a"]):
@@ -180,7 +180,7 @@ class HighLevelController:
     def _warm(self) -> bool:
         """Whether the previous plan seeds the mode search (it spans the horizon)."""
         prev = self.carry.previous
-        return prev is not None and prev.spans(self.settings.H)
+        return prev is not None and prev.spans(self.settings.periods)
 
     def _solve_built(self, step: StepData, asm: Assembled, tm: dict[str, float], t0: float) -> PlanResult:
         """Solve the assembled step with the solve path; the fallback when nothing works."""
@@ -207,12 +207,14 @@ class HighLevelController:
         tm["total"] = (time.perf_counter() - t0) * 1e3
         nb, nr, nc = model.n_binaries, model.n_rows, model.n_cols
         mode = np.asarray(att.mode)
+        periods = np.asarray(st.periods)
         if att.x is None:
-            states, controls, why = fallback_plan(self.carry.previous, step.x0, st.H, st.dt, self.params)
+            states, controls, why = fallback_plan(self.carry.previous, step.x0, periods, st.dt, self.params)
             diags.append(MIL515(f"t = {step.t:.2f} s: {msg}; fallback: {why}", Span(self.world.name)))
-            return PlanResult(PlanStatus.FALLBACK, float("nan"), controls, states, mode, nb, nr, nc, att.qps,
-                              att.certified, tm, {}, f"{att.status.value}: {msg}; fallback: {why}", att.gap,
-                              tuple(diags), st.solver, None if encode_error else att.status)
+            return PlanResult(PlanStatus.FALLBACK, float("nan"), controls[:st.H], states[:st.H + 1], mode, nb, nr, nc,
+                              att.qps, att.certified, tm, {}, f"{att.status.value}: {msg}; fallback: {why}", att.gap,
+                              tuple(diags), st.solver, None if encode_error else att.status,
+                              look_ahead=self._look_ahead(states, controls))
         x = att.x
         states = np.vstack([step.x0[None], x[asm.layout.x]])
         controls = x[asm.layout.u]
@@ -224,8 +226,14 @@ class HighLevelController:
         if asm.encoding.recovered:
             msg = "recovering: " + "; ".join(f"rule '{n}' violated now, required from k = {t2 - t}"
                                              for n, t, t2 in asm.encoding.recovered)
-        return PlanResult(att.status, float(att.cost), controls, states, mode, nb, nr, nc, att.qps,
-                          bool(att.certified), tm, rob, msg, float(att.gap), tuple(diags), st.solver)
+        return PlanResult(att.status, float(att.cost), controls[:st.H], states[:st.H + 1], mode, nb, nr, nc, att.qps,
+                          bool(att.certified), tm, rob, msg, float(att.gap), tuple(diags), st.solver,
+                          look_ahead=self._look_ahead(states, controls))
+
+    def _look_ahead(self, states: np.ndarray, controls: np.ndarray) -> LookAhead | None:
+        """The whole plan when the look-ahead is longer than the fine part (else None)."""
+        st = self.settings
+        return LookAhead(np.asarray(st.periods), st.dt, states, controls) if st.N > st.H else None
 
     def _recover_later(self, res: PlanResult, asm: Assembled, step: StepData, past: Mapping[str, np.ndarray], P: int,
                        tm: dict[str, float], t0: float) -> tuple[PlanResult, Assembled]:

@@ -20,6 +20,21 @@ and the NMPC baseline of :mod:`twolevel.control.nmpc`):
   take: the lanes beside the route's lane that run the same way, less half the ego's width.
   Sideways motion is never progress (the linearised route progress s_k would otherwise reward a
   swerve that shortens it when a stop line is near).
+* :func:`rss_terminal` — **can stop behind the vehicle ahead**, whatever it does within the
+  assumptions, at the end of the look-ahead (step N): the gap to the vehicle ahead in the ego's
+  lane within the sensing range is at least RSS's safe distance
+  (:func:`twolevel.world.assumptions.safe_distance`, the ego as the rear car: its response
+  time and braking, the assumed maximum braking of the vehicle ahead) plus a margin — *or* the
+  ego is beside it, in a lane of the drivable band (RSS's lateral safety: passing stays
+  possible). The gap is s_ahead,N − s_0 − (distance travelled) − (L_ego + L_ahead)/2, as for the
+  terminal stop (sideways motion does not shorten the distance travelled). RSS's distance is
+  convex in v_N, so it lies below each of its chords over the interval the chord spans: K rows,
+  one per chord over [v_lo, v̄ − w], [v̄ − w, v̄ + w], [v̄ + w, v_hi] (v̄ the linearisation's
+  speed, [v_lo, v_hi] every speed the step can reach), require the gap above the chords'
+  maximum — a conservative bound, exact to (2w)²/(8·brake) near v̄. When even full braking from
+  now misses a row (a cut-in), the row is relaxed by the miss, so the plan brakes as hard as it
+  must. The same chord over one fine step's [v_lo, v_hi] gives its ``rss_gap`` signal
+  (:mod:`twolevel.control.high_level.problem`).
 
 Units: m, m/s, m/s².
 """
@@ -29,13 +44,22 @@ from __future__ import annotations
 import math
 import weakref
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
+from twolevel.world.assumptions import ResponseBounds, safe_distance
 from twolevel.world.signals import HorizonConstants
 from twolevel.world.world import World
 
-__all__ = ["stop_lines", "can_stop_slope", "TerminalStop", "terminal_stop", "drivable_band"]
+__all__ = ["stop_lines", "can_stop_slope", "TerminalStop", "terminal_stop", "drivable_band", "RssTerminal",
+           "rss_terminal", "chord", "CHORD_HALF_WIDTH", "LATERAL_MARGIN"]
+
+CHORD_HALF_WIDTH = 0.5
+"""[m/s] w: half the width of the chord of RSS's distance around the linearisation's speed."""
+
+LATERAL_MARGIN = 0.5
+"""[m] Beside the vehicle ahead means the centres at least half the two widths and this apart."""
 
 
 def stop_lines(hc: HorizonConstants, *, stop: bool, light: bool) -> np.ndarray:
@@ -124,3 +148,71 @@ def drivable_band(world: World, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     grid, lo, hi = _band_table(world)
     i = np.clip(np.searchsorted(grid, np.asarray(s, float)), 1, len(grid) - 1)
     return np.maximum(lo[i - 1], lo[i]), np.minimum(hi[i - 1], hi[i])
+
+
+def chord(f: "Callable[[np.ndarray], np.ndarray]", a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Slope and intercept of the chords of ``f`` over [a, b] (elementwise; b at least a + 1e-3):
+    above a convex ``f`` everywhere on [a, b]."""
+    b = np.maximum(b, a + 1e-3)
+    fa, fb = f(a), f(b)
+    slope = (fb - fa) / (b - a)
+    return slope, fa - slope * a
+
+
+@dataclass(frozen=True, eq=False)
+class RssTerminal:
+    """*Can stop behind the vehicle ahead* at the end of the look-ahead (:func:`rss_terminal`), a
+    disjunction of three: **behind** it — for each chord j of K,
+    ``slope[j]``·v_N + (distance travelled from now to N) ≤ ``bound[j]`` [m] (v_0's share of the
+    distance moved into the bound) —, or **beside** it, the lateral offset e_N ≥ ``e_left`` or
+    ≤ ``e_right`` [m] (``sides``: whether the drivable band reaches there). ``active``: a vehicle
+    ahead is sensed (else every disjunct holds). ``rule`` (H, 2): the chord (slope [s],
+    intercept [m]) of RSS's distance over each fine step's reachable speeds, for the
+    ``rss_gap`` signal, and ``gap0`` [m]: ``rss_gap`` now."""
+
+    slope: np.ndarray
+    bound: np.ndarray
+    e_left: float
+    e_right: float
+    sides: tuple[bool, bool]
+    active: bool
+    rule: np.ndarray
+    gap0: float = float("inf")
+
+
+def rss_terminal(hc: HorizonConstants, response: ResponseBounds, *, s0: float, v0: float, steps: np.ndarray, H: int,
+                 v_lo: np.ndarray, v_hi: np.ndarray, v_bar: np.ndarray, margin: float, a_min: float,
+                 lateral: float, band: tuple[float, float], chords: int = 3) -> RssTerminal:
+    """The terminal disjunction of the module docstring's *can stop behind the vehicle ahead*
+    for a look-ahead of ``steps`` (N,) [s] from the ego at route position ``s0`` [m] and speed
+    ``v0`` [m/s]: ``v_lo``/``v_hi`` (N,) [m/s] bound the speeds each step k = 1..N can reach,
+    ``v_bar`` (N,) [m/s] are the linearisation's, ``margin`` [m] is kept beyond RSS's distance,
+    ``a_min`` [m/s²] is full braking (< 0), ``lateral`` [m] the offset from the vehicle ahead's
+    that counts as beside it and ``band`` (lo, hi) [m] the drivable band at step N."""
+    N = len(steps)
+    if hc.ahead < 0:
+        return RssTerminal(np.zeros(chords), np.ones(chords), 0.0, 0.0, (True, True), False, np.full((H, 2), np.nan))
+
+    def f(v: np.ndarray) -> np.ndarray:
+        return safe_distance(v, hc.v_ahead, response)
+
+    lo, hi = float(v_lo[-1]), max(float(v_hi[-1]), float(v_lo[-1]))
+    vb = min(max(float(v_bar[-1]), lo), hi)
+    w = CHORD_HALF_WIDTH
+    cuts = np.array([lo, min(max(vb - w, lo), hi), min(max(vb + w, lo), hi), hi]) if chords == 3 else \
+        np.linspace(lo, hi, chords + 1)
+    slope, icpt = chord(f, cuts[:-1], cuts[1:])
+    share = 0.5 * steps[0] * v0  # v_0's share of the distance travelled
+    bound = hc.s_ahead[N] - hc.ahead_offset - margin - s0 - share - icpt
+    # full braking from now: the least distance and speed the last step can have
+    vbrk = np.empty(N + 1)
+    vbrk[0] = v0
+    for i in range(N):  # N ≈ 20 scalar steps
+        vbrk[i + 1] = max(vbrk[i] + a_min * steps[i], 0.0)
+    travelled = float(np.sum(0.5 * steps * (vbrk[:-1] + vbrk[1:]))) - share
+    miss = slope * vbrk[N] + travelled - bound
+    bound = bound + np.maximum(miss, 0.0) + np.where(miss > -0.05, 0.05, 0.0)
+    e_left, e_right = hc.e_ahead + lateral, hc.e_ahead - lateral
+    rule = np.stack(chord(f, v_lo[:H], np.maximum(v_hi[:H], v_lo[:H])), axis=1)
+    gap0 = float(hc.s_ahead[0] - hc.ahead_offset - s0 - f(np.asarray(v0)))
+    return RssTerminal(slope, bound, e_left, e_right, (e_left <= band[1], e_right >= band[0]), True, rule, gap0)

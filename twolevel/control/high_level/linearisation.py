@@ -2,22 +2,26 @@
 
 :func:`prepare_step` turns (ego state, time, traffic, history, previous plan) into a
 :class:`StepData`: the reference (:mod:`twolevel.control.high_level.reference`: waypoints ω_k
-and the solve-time constants), the linearisation point (the previous plan shifted by one step,
-a rollout of the reference's controls, or full braking), the Jacobians of the kinematic bicycle
-along it (:func:`twolevel.models.bicycle.linearize`, vectorised), the state and steering bounds
-(reachable boxes) and the guards (:mod:`twolevel.control.high_level.guards`: the drivable band,
-the terminal can-still-stop condition). Units: m, rad, m/s, s.
+and the solve-time constants), the linearisation point (the previous plan shifted by one period,
+:func:`shifted`; a rollout of the reference's controls; or full braking), the Jacobians of the
+kinematic bicycle along it (:func:`twolevel.models.bicycle.linearize`, vectorised, each step for
+its own length), the state and steering bounds (reachable boxes; the speed the ego can stop from
+within its sensing range) and the guards (:mod:`twolevel.control.high_level.guards`: the
+drivable band, the terminal can-still-stop condition, RSS's distance to the vehicle ahead).
+Everything spans the whole look-ahead of :class:`~twolevel.control.high_level.settings.MPCSettings`
+(N steps, the first H of one period dt). Units: m, rad, m/s, s.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Mapping
 
 import numpy as np
 
-from twolevel.control.high_level.guards import TerminalStop, drivable_band, stop_lines, terminal_stop
+from twolevel.control.high_level.guards import (LATERAL_MARGIN, RssTerminal, TerminalStop, drivable_band, rss_terminal,
+                                                stop_lines, terminal_stop)
 from twolevel.control.high_level.reference import reference, reference_controls, wrap_to
 from twolevel.control.high_level.settings import MPCSettings
 from twolevel.control.planner import PreviousPlan
@@ -27,23 +31,26 @@ from twolevel.world.signals import HorizonConstants, StopMemory
 from twolevel.world.traffic import TrafficState
 from twolevel.world.world import World
 
-__all__ = ["StepData", "prepare_step", "direction_box", "steering_bound", "history_length"]
+__all__ = ["StepData", "prepare_step", "direction_box", "steering_bound", "history_length", "shifted", "sensing_bound"]
 
 
 @dataclass(frozen=True, eq=False)
 class StepData:
-    """One step's known quantities (k = 0..H; index 0 is now).
+    """One step's known quantities over the look-ahead (k = 0..N; index 0 is now; the first H
+    steps last one period, ``steps`` (N,) [s] are all the lengths).
 
-    ``xs_bar`` (H+1, 4) / ``us_bar`` (H, 2): linearisation point; ``A`` (H, 4, 4), ``B`` (H, 4, 2),
-    ``c`` (H, 4): x_{k+1} ≈ A_k x_k + B_k u_k + c_k; ``omega`` (H, 4): waypoints for k = 1..H;
-    ``s_ref`` (H+1,) [m] route positions of the waypoints; ``s_bar``/``h_bar``/``p_bar``: route
-    position, tangent heading and route point of the linearisation point's projection (k = 0..H),
-    for s_k ≈ s̄_k + t̄_kᵀ(p_k − p̄_k); ``lo``/``hi`` (H, 4): state bounds for k = 1..H;
-    ``e_lo``/``e_hi`` (H,) [m]: bounds on the lateral offset e_k ≈ n̄_kᵀ(p_k − p̄_k) for k = 1..H
+    ``xs_bar`` (N+1, 4) / ``us_bar`` (N, 2): linearisation point; ``A`` (N, 4, 4), ``B`` (N, 4, 2),
+    ``c`` (N, 4): x_{k+1} ≈ A_k x_k + B_k u_k + c_k; ``omega`` (N, 4): waypoints for k = 1..N;
+    ``s_ref`` (N+1,) [m] route positions of the waypoints; ``s_bar``/``h_bar``/``p_bar``: route
+    position, tangent heading and route point of the linearisation point's projection (k = 0..N),
+    for s_k ≈ s̄_k + t̄_kᵀ(p_k − p̄_k); ``lo``/``hi`` (N, 4): state bounds for k = 1..N;
+    ``e_lo``/``e_hi`` (N,) [m]: bounds on the lateral offset e_k ≈ n̄_kᵀ(p_k − p̄_k) for k = 1..N
     (:func:`twolevel.control.high_level.guards.drivable_band`, widened to include where the ego and the
-    linearisation point already are); ``term``: the can-still-stop terminal condition
+    linearisation point already are); ``term``: the can-still-stop terminal condition at step N
     (:func:`twolevel.control.high_level.guards.terminal_stop`, inactive when no line applies); ``delta_hi``
-    (H,) [rad]: the steering bound per step (:func:`steering_bound`; None: the steering limit)."""
+    (N,) [rad]: the steering bound per step (:func:`steering_bound`; None: the steering limit);
+    ``rss``: RSS's distance to the vehicle ahead at step N (:func:`twolevel.control.high_level.guards.rss_terminal`;
+    None when the settings do not ask for it)."""
 
     t: float
     x0: np.ndarray
@@ -66,6 +73,14 @@ class StepData:
     e_hi: np.ndarray
     term: TerminalStop = TerminalStop()
     delta_hi: np.ndarray | None = None
+    steps: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    H: int = 0
+    rss: RssTerminal | None = None
+
+    @property
+    def N(self) -> int:
+        """Steps of the look-ahead."""
+        return int(self.A.shape[0])
 
 
 def _cos_range(lo: np.ndarray, hi: np.ndarray, phase: float) -> tuple[np.ndarray, np.ndarray]:
@@ -78,15 +93,18 @@ def _cos_range(lo: np.ndarray, hi: np.ndarray, phase: float) -> tuple[np.ndarray
     return np.where(has_min, -1.0, mn), np.where(has_max, 1.0, mx)
 
 
-def direction_box(x0: np.ndarray, H: int, dt: float, params: BicycleParams, v_cap: float,
+def direction_box(x0: np.ndarray, ticks: np.ndarray, dt: float, params: BicycleParams, v_cap: float,
                   margin: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
-    """State bounds (H, 4) for k = 1..H: speed in [0, min(v0 + a_max·k·dt, v_cap)], heading within
-    the yaw the steering limit allows, and X/Y within the sum of per-step displacement boxes
-    (distance ≤ v·dt in any direction of the reachable heading cone), widened by ``margin`` [m]."""
+    """State bounds (N, 4) for k = 1..N at the times dt·``ticks`` [s] (``ticks`` (N+1,), whole
+    periods from now): speed in [0, min(v0 + a_max·t_k, v_cap)], heading within the yaw the
+    steering limit allows, and X/Y within the sum of per-step displacement boxes (distance ≤
+    v·h_k in any direction of the reachable heading cone), widened by ``margin`` [m]."""
     X, Y, psi, v = (float(a) for a in x0[:4])
-    k = np.arange(1, H + 1)
+    k = np.asarray(ticks)[1:]
+    H = len(k)
+    h = dt * np.diff(ticks)
     v_hi = np.minimum(v + params.a_max * k * dt, v_cap)
-    step = dt * np.concatenate([[v], v_hi[:-1]]) + 0.5 * params.a_max * dt * dt
+    step = h * np.concatenate([[v], v_hi[:-1]]) + 0.5 * params.a_max * h * h
     step = np.maximum(step, 0.0)
     yaw = np.cumsum(step * math.tan(params.delta_max) / params.l_f)
     yaw = np.minimum(yaw, math.pi)
@@ -117,56 +135,91 @@ def steering_bound(v: np.ndarray, kappa: np.ndarray, params: BicycleParams) -> n
     return np.minimum(params.delta_max, np.maximum(lat, need))
 
 
+def shifted(prev: PreviousPlan, x0: np.ndarray, periods: np.ndarray, dt: float, params: BicycleParams
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """The previous plan one period ``dt`` [s] later, on this step's grid of ``periods`` (N,)
+    [periods per step]: states (N+1, 4) — ``x0`` now, then the previous plan's state at each
+    step's time (its own sample when the grids meet, as over the fine part; else advanced from
+    the sample before by the control it held, exactly: the bicycle under a held control) — and
+    controls (N, 2), the previous plan's control in force at each step's start (its last one
+    beyond its end)."""
+    ticks = np.concatenate([[0], np.cumsum(periods)])
+    prev_ticks = np.concatenate([[0], np.cumsum(prev.periods)])
+    q = ticks[1:] + 1  # this step's sample times in the previous plan's periods
+    j = np.clip(np.searchsorted(prev_ticks, q, side="right") - 1, 0, len(prev_ticks) - 1)
+    u_j = prev.controls[np.minimum(j, len(prev.controls) - 1)]
+    xs = np.vstack([x0[None], bicycle.step(prev.states[j], u_j, dt * (q - prev_ticks[j]), params)])
+    xs[:, 2] = wrap_to(xs[:, 2], float(x0[2]))
+    jc = np.clip(np.searchsorted(prev_ticks, ticks[:-1] + 1, side="right") - 1, 0, len(prev.controls) - 1)
+    return xs, prev.controls[jc]
+
+
+def sensing_bound(v0: float, ticks: np.ndarray, dt: float, v_sense: float, brake: float) -> np.ndarray:
+    """The speed bound [m/s] at the times dt·``ticks[1:]`` [s] from what the ego can see:
+    ``v_sense`` [m/s] (it stops within its sensing range from there,
+    :class:`~twolevel.world.loader.Sensing`), or, for an ego already faster (``v0`` [m/s]),
+    braking at ``brake`` [m/s²] down to it."""
+    return np.maximum(v_sense, v0 - brake * dt * np.asarray(ticks[1:]))
+
+
 def prepare_step(
     world: World, x0: np.ndarray, t: float, traffic: TrafficState, settings: MPCSettings, params: BicycleParams,
     *, prev: PreviousPlan | None = None, u_prev: np.ndarray | None = None, memory: StopMemory | None = None,
     s_hint: float | None = None, about: str = "plan", stop_rules: tuple[bool, bool] = (False, False),
 ) -> StepData:
-    """Everything known at time ``t`` [s] for ego state ``x0`` = (X, Y, ψ, v), over the horizon
-    and period of ``settings``.
+    """Everything known at time ``t`` [s] for ego state ``x0`` = (X, Y, ψ, v), over the
+    look-ahead of ``settings``.
 
-    ``prev``: the previous plan, made one step ago; it is shifted by one step to give the
-    linearisation point (``about="plan"``); ``about="reference"`` linearises about a rollout of
-    the reference's controls, ``"brake"`` about full braking. ``u_prev`` [δ, a] is the control
-    applied during the last step (for the ‖u_0 − u_{−1}‖² term; default the previous plan's
-    first). ``stop_rules`` = (a rule reads d_stop, a rule reads light_red/d_light): which lines
-    the terminal can-still-stop condition guards, with ``settings.stop_decel`` [m/s²] and
+    ``prev``: the previous plan, made one period ago; shifted by one period (:func:`shifted`) it
+    gives the linearisation point (``about="plan"``); ``about="reference"`` linearises about a
+    rollout of the reference's controls, ``"brake"`` about full braking. ``u_prev`` [δ, a] is the
+    control applied during the last step (for the ‖u_0 − u_{−1}‖² term; default the previous
+    plan's first). ``stop_rules`` = (a rule reads d_stop, a rule reads light_red/d_light): which
+    lines the terminal can-still-stop condition guards, with ``settings.stop_decel`` [m/s²] and
     ``settings.stop_margin`` [m] before the line; ``settings.band``: bound the lateral offset to
-    the drivable band. ``memory``, ``s_hint``: see :func:`~twolevel.control.high_level.reference.reference`."""
-    H, dt = settings.H, settings.dt
+    the drivable band; ``settings.rss``: keep RSS's distance behind the vehicle ahead. The speed
+    is bounded by what the ego can see (:func:`sensing_bound`, the world's
+    ``settings.v_sense``). ``memory``, ``s_hint``: see
+    :func:`~twolevel.control.high_level.reference.reference`."""
+    H, N, dt = settings.H, settings.N, settings.dt
+    periods = np.asarray(settings.periods)
+    ticks = np.asarray(settings.ticks)
+    steps = dt * periods
     stop_decel, stop_margin = settings.stop_decel, settings.stop_margin
     route = world.route
+    ws = world.settings
     x0 = np.asarray(x0, dtype=float)[:4].copy()
     ref = reference(world, x0, t, traffic, settings, params, memory=memory, s_hint=s_hint, stop_rules=stop_rules)
     s0, s_ref, v_ref, omega, hc = ref.s0, ref.s_ref, ref.v_ref, ref.omega, ref.hc
     if about == "brake":  # a braking rollout with the wheel straight (to standstill, no reversing)
-        us_bar = np.zeros((H, 2))
+        us_bar = np.zeros((N, 2))
         v = float(x0[3])
-        for k in range(H):
-            us_bar[k, 1] = max(params.a_min, -v / dt)
-            v = max(v + us_bar[k, 1] * dt, 0.0)
-        xs_bar = bicycle.rollout(x0, us_bar, dt, params)
+        for k in range(N):
+            us_bar[k, 1] = max(params.a_min, -v / steps[k])
+            v = max(v + us_bar[k, 1] * steps[k], 0.0)
+        xs_bar = bicycle.rollout(x0, us_bar, steps, params)
         if u_prev is None and prev is not None:
             u_prev = prev.controls[0]
     elif prev is not None and about == "plan":
-        ps, pu = prev.states, prev.controls
-        us_bar = np.vstack([pu[1:], pu[-1:]])
-        xs_bar = np.vstack([x0[None], ps[2:], bicycle.step(ps[-1], pu[-1], dt, params)[None]])
-        xs_bar[:, 2] = wrap_to(xs_bar[:, 2], float(x0[2]))
+        xs_bar, us_bar = shifted(prev, x0, periods, dt, params)
         if u_prev is None:
-            u_prev = pu[0]
+            u_prev = prev.controls[0]
     else:
-        us_bar = reference_controls(route.curvature_at(s_ref[:-1]), v_ref, dt, params)
-        xs_bar = bicycle.rollout(x0, us_bar, dt, params)
+        us_bar = reference_controls(route.curvature_at(s_ref[:-1]), v_ref, steps, params)
+        xs_bar = bicycle.rollout(x0, us_bar, steps, params)
     if u_prev is None:
         u_prev = np.zeros(2)
-    A, B, c = bicycle.linearize(xs_bar[:-1], us_bar, dt, params)
-    s_bar, _ = route.project_near(xs_bar[:, :2], np.full(H + 1, s0) + np.arange(H + 1) * dt * max(x0[3], 1.0),
-                                  H * dt * (max(x0[3], 1.0) + params.a_max * H * dt) + 10.0)
+    A, B, c = bicycle.linearize(xs_bar[:-1], us_bar, steps, params)
+    v_guess = max(x0[3], 1.0)
+    T = float(ticks[-1] * dt)
+    s_bar, _ = route.project_near(xs_bar[:, :2], np.full(N + 1, s0) + ticks * dt * v_guess,
+                                  T * (v_guess + params.a_max * ticks[-1] * dt) + 10.0)
     h_bar = route.heading_at(s_bar)
     p_bar = route.position(s_bar)
     v_cap = max(float(route.limit_v.max()) * 1.5, float(x0[3]) + 1.0, params.v_max)
-    lo, hi = direction_box(x0, H, dt, params, min(v_cap, params.v_max) if x0[3] <= params.v_max else v_cap)
+    lo, hi = direction_box(x0, ticks, dt, params, min(v_cap, params.v_max) if x0[3] <= params.v_max else v_cap)
+    if math.isfinite(ws.v_sense):
+        hi[:, 3] = np.minimum(hi[:, 3], sensing_bound(float(x0[3]), ticks, dt, ws.v_sense, ws.response.brake_min))
     width = float(route.width_at(s0))
     # lateral offsets: the drivable band (never narrower than where the ego / the linearisation are)
     n_bar = np.stack([-np.sin(h_bar), np.cos(h_bar)], axis=1)
@@ -176,7 +229,7 @@ def prepare_step(
         e_lo = np.minimum(b_lo, e_bar[0] - 0.05)
         e_hi = np.maximum(b_hi, e_bar[0] + 0.05)
     else:
-        e_lo, e_hi = np.full(H, -1e4), np.full(H, 1e4)
+        e_lo, e_hi = np.full(N, -1e4), np.full(N, 1e4)
     term = TerminalStop()
     s_line = math.inf
     if any(stop_rules):
@@ -184,12 +237,19 @@ def prepare_step(
     if route.v_des.size and route.v_des[-1] <= 1e-9:  # the route stops at its goal
         s_line = min(s_line, float(route.s[-1]) + stop_margin)
     if math.isfinite(s_line):
-        reach = min(max(s_line - stop_margin - s0, 0.5), world.settings.r_near)
+        reach = min(max(s_line - stop_margin - s0, 0.5), ws.r_near)
         term = terminal_stop(s_line, s0 + ref.d_brake, ref.v_brake, decel=stop_decel, reach=reach, margin=stop_margin)
+    rss = None
+    if settings.rss:
+        v_lo = np.maximum(float(x0[3]) + params.a_min * dt * ticks[1:], 0.0)
+        lateral = 0.5 * (world.ego.width + float(world.parts.width[hc.ahead])) + LATERAL_MARGIN if hc.ahead >= 0 else 0.0
+        rss = rss_terminal(hc, ws.response, s0=s0, v0=float(x0[3]), steps=steps, H=H, v_lo=v_lo, v_hi=hi[:, 3],
+                           v_bar=xs_bar[1:, 3], margin=ws.D_safe, a_min=params.a_min, lateral=lateral,
+                           band=(float(e_lo[-1]), float(e_hi[-1])))
     return StepData(t, x0, np.asarray(u_prev, float), xs_bar, us_bar, A, B, c, omega, s_ref, s_bar, h_bar, p_bar,
                     lo, hi, hc, width, e_lo, e_hi, term, steering_bound(np.maximum(xs_bar[:-1, 3], x0[3]),
-                                                                        route.curvature_at(s_ref[:-1]),
-                                                                        params))
+                                                                        route.curvature_at(s_ref[:-1]), params),
+                    steps, H, rss)
 
 
 def history_length(history: Mapping[str, np.ndarray] | None, names: set[str], depth: int) -> int:

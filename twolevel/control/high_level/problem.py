@@ -1,20 +1,29 @@
 """One MPC step as a :class:`~twolevel.milp.model.MilpModel`: dynamics, the paper's cost, rules.
 
-Columns: ``x`` — the states X, Y, ψ, v for k = 1..H (row-major, 4 per step); ``u`` — the inputs
-δ, a for k = 0..H−1; then the encoder's variables (binaries of disjunctions, auxiliaries).
-Rows: ``dyn`` — x_{k+1} − A_k x_k − B_k u_k = c_k (A_0 x_0 moved to the right-hand side);
-``guard`` (:mod:`twolevel.control.high_level.guards`) — the lateral offset e_k ≈ n̄_kᵀ(p_k − p̄_k) within the
-drivable band for k = 1..H, and the terminal can-still-stop row
-v_H ≤ κ·(s_line − margin − s_0 − Σ_k dt·(v_k + v_{k+1})/2) + offset on the distance travelled
-(which no sideways motion shortens, and which bounds the route progress from above; ``0·x ≤ 1``
-when no line applies, so the pattern never changes); then the rules' rows (``stl``, and ``cf*`` for the vectorised collision_free blocks).
+Columns: ``x`` — the states X, Y, ψ, v for k = 1..N (row-major, 4 per step; N steps of the
+look-ahead, the first H of one period); ``u`` — the inputs δ, a for k = 0..N−1; then the
+encoder's variables (binaries of disjunctions, auxiliaries).
+Rows: ``dyn`` — x_{k+1} − A_k x_k − B_k u_k = c_k (A_0 x_0 moved to the right-hand side; each
+step discretised for its length h_k); ``guard`` (:mod:`twolevel.control.high_level.guards`) — the
+lateral offset e_k ≈ n̄_kᵀ(p_k − p̄_k) within the drivable band for k = 1..N, the terminal
+can-still-stop row v_N ≤ κ·(s_line − margin − s_0 − Σ_k h_k·(v_k + v_{k+1})/2) + offset on the
+distance travelled (which no sideways motion shortens, and which bounds the route progress from
+above; ``0·x ≤ 1`` when no line applies, so the pattern never changes), and, when the settings
+keep RSS's distance, the terminal disjunction *behind the vehicle ahead by RSS's distance (K
+chord rows) or beside it (left, right)* with its cover row (binaries ``rss``; zero rows that
+always hold when no vehicle is ahead); then the rules' rows (``stl``, and ``cf*`` for the vectorised collision_free blocks),
+over the fine part only.
 
-Cost (paper): Σ_k w_u‖u_k‖² + w_du‖u_k − u_{k−1}‖² + Σ_i w_i (ζ_{k,i} − ω_{k,i})², as residuals.
+Cost (paper): Σ_k w_u‖u_k‖² + w_du‖u_k − u_{k−1}‖² + Σ_i w_i (ζ_{k,i} − ω_{k,i})², as residuals,
+over every step of the look-ahead.
 
-Signals of the trace (past samples from ``history``, then now, then k = 1..H): constants for what
-is known at solve time, :class:`~twolevel.compiler.signals.AffineSignal` for v, X, Y, ψ, δ, a, the
-route progress s_k ≈ s̄_k + t̄_kᵀ(p_k − p̄_k), the lateral offset e_k ≈ n̄_kᵀ(p_k − p̄_k),
-d_stop,k = s_stop − s_k, d_light,k = s_light − s_k and d_lead,k = s_lead,k − s_k − offset.
+Signals of the trace (past samples from ``history``, then now, then k = 1..H: the rules see the
+fine part, in steps of dt): constants for what is known at solve time,
+:class:`~twolevel.compiler.signals.AffineSignal` for v, X, Y, ψ, δ, a, the route progress
+s_k ≈ s̄_k + t̄_kᵀ(p_k − p̄_k), the lateral offset e_k ≈ n̄_kᵀ(p_k − p̄_k), d_stop,k = s_stop − s_k,
+d_light,k = s_light − s_k, d_lead,k = s_lead,k − s_k − offset and
+rss_gap,k = s_ahead,k − s_k − offset − (c0_k + c1_k·v_k), the chord of RSS's distance over the
+speeds step k can reach (above it: conservative).
 
 Every model of the same *shape* (same triplet structure, same finiteness of bounds, same
 disjunctions) shares one CSC pattern (:class:`~twolevel.milp.model.PatternCache`), so the
@@ -38,11 +47,11 @@ from twolevel.control.high_level.linearisation import StepData
 from twolevel.control.high_level.settings import MPCSettings, Weights
 from twolevel.diagnostics import Diagnostic, Span
 from twolevel.milp.builder import ModelBuilder
-from twolevel.milp.model import MilpModel, PatternCache, Residuals
+from twolevel.milp.model import Disjunction, MilpModel, PatternCache, Residuals
 from twolevel.models.params import BicycleParams
 
 __all__ = ["StepRules", "Layout", "Assembled", "assemble", "trace_signals", "shape_key", "dynamics_values",
-           "guard_values", "others_of", "set_cost", "input_bounds"]
+           "guard_values", "rss_bounds", "others_of", "set_cost", "input_bounds"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -61,12 +70,16 @@ class StepRules:
 
 @dataclass(frozen=True, eq=False)
 class Layout:
-    """Column indices: ``x`` (H, 4) states k = 1..H, ``u`` (H, 2) inputs k = 0..H−1; ``P`` past
-    samples in the trace (the current step is trace index P)."""
+    """Column indices: ``x`` (N, 4) states k = 1..N, ``u`` (N, 2) inputs k = 0..N−1; ``P`` past
+    samples in the trace (the current step is trace index P); ``H`` steps of the fine part (the
+    rules' trace holds now and k = 1..H); ``rss`` (3,): the binaries of the RSS terminal
+    disjunction (behind, left, right; none when the settings do not keep RSS's distance)."""
 
     x: np.ndarray
     u: np.ndarray
     P: int
+    H: int
+    rss: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
 
 @dataclass(eq=False)
@@ -109,11 +122,13 @@ def _affine(cols: np.ndarray, coefs: np.ndarray, offset: np.ndarray, past: np.nd
 
 def trace_signals(step: StepData, lay: Layout, n: int, past: Mapping[str, np.ndarray], names: Iterable[str]
                   ) -> dict[str, object]:
-    """The signals the rules read, over the trace (P past samples, now, k = 1..H)."""
-    H = lay.x.shape[0]
+    """The signals the rules read, over the trace (P past samples, now, k = 1..H of the fine part)."""
+    H = lay.H
     P = lay.P
     hc = step.hc
     x0 = step.x0
+    full, lay = lay, Layout(lay.x[:H], lay.u[:H], P, H)
+    f = slice(0, H + 1)  # the fine part of the look-ahead's constants
 
     def hist(name: str, now: float) -> np.ndarray:
         h = past.get(name)
@@ -122,11 +137,12 @@ def trace_signals(step: StepData, lay: Layout, n: int, past: Mapping[str, np.nda
 
     one = np.ones((H, 1))
     s_now = float(step.s_bar[0])
-    t_hat = np.stack([np.cos(step.h_bar[1:]), np.sin(step.h_bar[1:])], axis=1)
-    n_hat = np.stack([-np.sin(step.h_bar[1:]), np.cos(step.h_bar[1:])], axis=1)
+    h_bar, p_bar = step.h_bar[1:H + 1], step.p_bar[1:H + 1]
+    t_hat = np.stack([np.cos(h_bar), np.sin(h_bar)], axis=1)
+    n_hat = np.stack([-np.sin(h_bar), np.cos(h_bar)], axis=1)
     xy = lay.x[:, :2]
-    s_off = step.s_bar[1:] - np.einsum("kj,kj->k", t_hat, step.p_bar[1:])
-    e_off = -np.einsum("kj,kj->k", n_hat, step.p_bar[1:])
+    s_off = step.s_bar[1:H + 1] - np.einsum("kj,kj->k", t_hat, p_bar)
+    e_off = -np.einsum("kj,kj->k", n_hat, p_bar)
     e_now = float(n_hat[0] @ (x0[:2] - step.p_bar[0])) if H else 0.0
     out: dict[str, object] = {}
     for name in names:
@@ -136,8 +152,9 @@ def trace_signals(step: StepData, lay: Layout, n: int, past: Mapping[str, np.nda
         elif name in ("delta", "a"):
             j = 0 if name == "delta" else 1
             # sample k carries the control applied from k on (twolevel.world.provided): now is u_0,
-            # the last recorded sample u_{-1}; beyond the horizon u_{H-1} is held
-            cols = np.concatenate([lay.u[:, j], lay.u[-1:, j]])[:, None]
+            # the last recorded sample u_{-1}; sample H the first coarse step's control, or u_{H-1}
+            # held when the look-ahead ends there
+            cols = np.concatenate([full.u[:, j], full.u[-1:, j]])[:H + 1, None]
             out[name] = _affine(cols, np.ones((H + 1, 1)), np.zeros(H + 1), hist(name, 0.0)[:-1], n)
         elif name == "s":
             out[name] = _affine(xy, t_hat, s_off, hist("s", s_now), n)
@@ -149,16 +166,25 @@ def trace_signals(step: StepData, lay: Layout, n: int, past: Mapping[str, np.nda
             elif name == "d_light":
                 tgt, extra = np.full(H + 1, hc.s_light), 0.0
             else:
-                tgt, extra = hc.s_lead, hc.lead_offset
+                tgt, extra = hc.s_lead[f], hc.lead_offset
             if not np.all(np.isfinite(tgt)):
                 out[name] = np.concatenate([hist(name, np.inf)[:-1], np.full(H + 1, np.inf)])
             else:
                 now = float(tgt[0] - s_now - extra)
                 out[name] = _affine(xy, -t_hat, tgt[1:] - extra - s_off, hist(name, now), n)
+        elif name == "rss_gap":
+            rss = step.rss
+            if rss is None or not rss.active:
+                out[name] = np.concatenate([hist(name, np.inf)[:-1], np.full(H + 1, np.inf)])
+            else:  # s_ahead,k − s_k − offset − (c0 + c1·v_k): three coefficients per sample
+                cols = np.concatenate([xy, lay.x[:, 3:4]], axis=1)
+                coefs = np.concatenate([-t_hat, -rss.rule[:, :1]], axis=1)
+                off = hc.s_ahead[1:H + 1] - hc.ahead_offset - s_off - rss.rule[:, 1]
+                out[name] = _affine(cols, coefs, off, hist(name, rss.gap0), n)
         elif name == "v_max":
-            out[name] = np.concatenate([hist(name, float(hc.v_max[0]))[:-1], hc.v_max])
+            out[name] = np.concatenate([hist(name, float(hc.v_max[0]))[:-1], hc.v_max[f]])
         elif name == "light_red":
-            out[name] = np.concatenate([hist(name, float(hc.light_red[0]))[:-1], hc.light_red])
+            out[name] = np.concatenate([hist(name, float(hc.light_red[0]))[:-1], hc.light_red[f]])
         elif name == "v_lead":
             v_lead = float(hc.v[hc.lead]) if hc.lead >= 0 else np.nan
             if hc.lead < 0:
@@ -201,32 +227,87 @@ def _dynamics(b: ModelBuilder, step: StepData, lay: Layout) -> None:
                np.concatenate([v_id.ravel(), v_a.ravel(), v_b.ravel()]), rhs.ravel(), rhs.ravel())
 
 
+def _travelled(steps: np.ndarray) -> np.ndarray:
+    """(N,) [s]: the weights of v_1..v_N in the distance travelled from now to step N,
+    Σ_k h_k (v_k + v_{k+1})/2 (v_0's share aside)."""
+    return 0.5 * (steps + np.concatenate([steps[1:], [0.0]]))
+
+
+def _box_range(n_hat: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[float, float]:
+    """Min and max of n̂ᵀp [m] over the box lo ≤ p ≤ hi (2,)."""
+    a, b = n_hat * lo, n_hat * hi
+    return float(np.minimum(a, b).sum()), float(np.maximum(a, b).sum())
+
+
+def rss_bounds(step: StepData) -> np.ndarray:
+    """Upper bounds (3,) of the RSS terminal disjunction's binaries (behind, left, right): a
+    side the drivable band does not reach is switched off."""
+    rss = step.rss
+    if rss is None:
+        return np.zeros(0)
+    return np.array([1.0, float(rss.sides[0] or not rss.active), float(rss.sides[1] or not rss.active)])
+
+
 def guard_values(step: StepData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The ``guard`` block's triplet values (in :func:`_guards`' order) and row bounds (lo, hi)."""
-    H = step.A.shape[0]
+    N = step.A.shape[0]
     h = step.h_bar[1:]
     n_hat = np.stack([-np.sin(h), np.cos(h)], axis=1)
     base = np.einsum("kj,kj->k", n_hat, step.p_bar[1:])
     tm = step.term
-    dt = float(step.hc.t[1] - step.hc.t[0]) if len(step.hc.t) > 1 else 0.1
-    if tm.active:  # v_H + κ·(distance travelled) ≤ κ·(s_line − margin − s_0) + offset
-        w = np.full(H, tm.slope * dt)
-        w[-1] = 1.0 + 0.5 * tm.slope * dt
-        term_hi = tm.slope * (tm.s_line - tm.margin - float(step.s_bar[0]) - 0.5 * dt * float(step.x0[3])) + tm.offset
+    trav = _travelled(step.steps)
+    if tm.active:  # v_N + κ·(distance travelled) ≤ κ·(s_line − margin − s_0) + offset
+        w = tm.slope * trav
+        w[-1] += 1.0
+        term_hi = tm.slope * (tm.s_line - tm.margin - float(step.s_bar[0]) - 0.5 * step.steps[0] * float(step.x0[3])) \
+            + tm.offset
     else:
-        w, term_hi = np.zeros(H), 1.0
-    vals = np.concatenate([n_hat.ravel(), w])
-    lo = np.concatenate([step.e_lo + base, [-np.inf]])
-    hi = np.concatenate([step.e_hi + base, [term_hi]])
-    return vals, lo, hi
+        w, term_hi = np.zeros(N), 1.0
+    vals = [n_hat.ravel(), w]
+    lo = [step.e_lo + base, [-np.inf]]
+    hi = [step.e_hi + base, [term_hi]]
+    rss = step.rss
+    if rss is not None:  # the RSS terminal disjunction: behind (K rows), left, right, and its cover
+        K = len(rss.slope)
+        if rss.active:
+            n_N, b_N = n_hat[-1], float(base[-1])
+            v_hi = step.hi[:, 3]
+            # behind: bound − slope·v_N − Σ w v ≥ 0, relaxed by M when its binary is 0
+            m_b = np.maximum(0.0, rss.slope * v_hi[-1] + trav @ v_hi - rss.bound) + 1.0
+            coef = np.broadcast_to(-trav, (K, N)).copy()
+            coef[:, -1] -= rss.slope
+            e_min, e_max = _box_range(n_N, step.lo[-1, :2], step.hi[-1, :2])
+            m_l = max(0.0, rss.e_left + b_N - e_min) + 1.0
+            m_r = max(0.0, e_max - rss.e_right - b_N) + 1.0
+            vals += [np.column_stack([coef, -m_b]).ravel(), n_N, [-m_l], -n_N, [-m_r], np.ones(3)]
+            lo += [-rss.bound - m_b, [rss.e_left + b_N - m_l], [-(rss.e_right + b_N) - m_r], [1.0]]
+        else:  # every disjunct holds
+            vals += [np.zeros(K * (N + 1) + 6), np.ones(3)]
+            lo += [np.full(K + 2, -1.0), [1.0]]
+        hi += [np.full(K + 3, np.inf)]
+    return np.concatenate(vals), np.concatenate(lo), np.concatenate(hi)
 
 
 def _guards(b: ModelBuilder, step: StepData, lay: Layout) -> None:
-    H = lay.x.shape[0]
-    rows = np.concatenate([np.repeat(np.arange(H), 2), np.full(H, H)])
-    cols = np.concatenate([lay.x[:, :2].ravel(), lay.x[:, 3]])
+    N = lay.x.shape[0]
+    rows = [np.repeat(np.arange(N), 2), np.full(N, N)]
+    cols = [lay.x[:, :2].ravel(), lay.x[:, 3]]
+    n_rows = N + 1
+    rss = step.rss
+    if rss is not None:
+        K = len(rss.slope)
+        behind = N + 1 + np.arange(K)
+        rows += [np.repeat(behind, N + 1), np.full(3, N + 1 + K), np.full(3, N + 2 + K), np.full(3, N + 3 + K)]
+        cols += [np.tile(np.append(lay.x[:, 3], lay.rss[0]), K), np.append(lay.x[-1, :2], lay.rss[1]),
+                 np.append(lay.x[-1, :2], lay.rss[2]), lay.rss]
+        n_rows += K + 3
     vals, lo, hi = guard_values(step)
-    b.add_rows("guard", H + 1, rows, cols, vals, lo, hi)
+    g = b.add_rows("guard", n_rows, np.concatenate(rows), np.concatenate(cols), vals, lo, hi)
+    if rss is not None:
+        K = len(rss.slope)
+        b.add_disjunction(Disjunction(len(b.disjunctions), lay.rss.copy(), (g[N + 1:N + 1 + K], g[[N + 1 + K]],
+                                                                             g[[N + 2 + K]]), int(g[N + 3 + K]),
+                                      label="rss terminal: behind | left | right"))
 
 
 @dataclass(frozen=True, eq=False)
@@ -296,11 +377,12 @@ def _base_cost_shape(lay: Layout, w: Weights, n: int) -> _CostShape:
 
 
 def others_of(step: StepData, P: int) -> np.ndarray:
-    """Other vehicles' predicted positions over the trace (n, P+1+H, 2), NaN before now [m]."""
+    """Other vehicles' predicted positions over the trace (n, P+1+H, 2), NaN before now [m]
+    (H: the fine part)."""
     hc = step.hc
-    H = step.A.shape[0]
+    H = step.H
     others = np.full((len(hc.index), P + 1 + H, 2), np.nan)
-    others[:, P:, :] = hc.xy
+    others[:, P:, :] = hc.xy[:, :H + 1]
     return others
 
 
@@ -329,18 +411,19 @@ def assemble(
     step: StepData, rules: StepRules, settings: MPCSettings, params: BicycleParams, *,
     cache: PatternCache | None = None, stable: bool = False, keep: np.ndarray | None = None, recover: bool = True,
 ) -> Assembled:
-    """Build the step's model (dynamics, cost, every requirement's MILCs) over the horizon and
-    period of ``settings``, with its weights and margin ``eps``. ``stable``: the encoder's stable
+    """Build the step's model (dynamics, cost, guards over the look-ahead of ``step``; every
+    requirement's MILCs over its fine part) with the weights and margin ``eps`` of ``settings``. ``stable``: the encoder's stable
     mode (a structure that :mod:`twolevel.control.high_level.template` can refresh), with
     vehicle–step pairs kept within d + ``settings.pad`` [m] (or the pair codes ``keep``).
     ``recover``: a rule already false now by known signals is required from the first step the
     plan can change (``MIL517`` warning) instead of making the step infeasible."""
-    H, P = settings.H, rules.P
+    N, H, P = step.N, step.H, rules.P
     b = ModelBuilder()
-    xb = b.add_vars("x", 4 * H, step.lo.ravel(), step.hi.ravel())
+    xb = b.add_vars("x", 4 * N, step.lo.ravel(), step.hi.ravel())
     u_lo, u_hi = input_bounds(step, params)
-    ub = b.add_vars("u", 2 * H, u_lo.ravel(), u_hi.ravel())
-    lay = Layout(xb.idx.reshape(H, 4), ub.idx.reshape(H, 2), P)
+    ub = b.add_vars("u", 2 * N, u_lo.ravel(), u_hi.ravel())
+    rb = b.add_vars("rss", 3, 0.0, rss_bounds(step), integer=True).idx if step.rss is not None else np.zeros(0, np.int64)
+    lay = Layout(xb.idx.reshape(N, 4), ub.idx.reshape(N, 2), P, H, rb)
     _dynamics(b, step, lay)
     _guards(b, step, lay)
     sigs = trace_signals(step, lay, b.n_cols, rules.past, rules.names | {"x", "y"})

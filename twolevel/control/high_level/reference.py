@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from typing import Sequence
 
 import numpy as np
 
@@ -29,9 +30,10 @@ __all__ = ["Reference", "reference", "reference_controls", "braking", "wrap_to"]
 @dataclass(frozen=True, eq=False)
 class Reference:
     """The ego's station now (``s0``, ``e0`` [m] along and across the route), the waypoints'
-    route positions ``s_ref`` (H+1,) [m] and speeds ``v_ref`` (H+1,) [m/s], the waypoints
-    ``omega`` (H, 4) = (X, Y, ψ, v) for k = 1..H, the solve-time constants ``hc`` along them,
-    and where full braking from now ends the horizon: ``d_brake`` [m] further, at ``v_brake`` [m/s]."""
+    route positions ``s_ref`` (N+1,) [m] and speeds ``v_ref`` (N+1,) [m/s], the waypoints
+    ``omega`` (N, 4) = (X, Y, ψ, v) for k = 1..N (the whole look-ahead), the solve-time constants
+    ``hc`` along them, and where full braking from now ends the look-ahead: ``d_brake`` [m]
+    further, at ``v_brake`` [m/s]."""
 
     s0: float
     e0: float
@@ -48,32 +50,34 @@ def wrap_to(angle: np.ndarray | float, ref: float) -> np.ndarray:
     return ref + np.mod(np.asarray(angle, float) - ref + math.pi, 2 * math.pi) - math.pi
 
 
-def reference_controls(route_kappa: np.ndarray, v_ref: np.ndarray, dt: float, params: BicycleParams
-                       ) -> np.ndarray:
-    """The controls (H, 2) [δ rad, a m/s²] that follow the route's curvature ``route_kappa`` (H,)
-    [1/m] at the reference speeds ``v_ref`` (H+1,) [m/s], within the bicycle's limits."""
+def reference_controls(route_kappa: np.ndarray, v_ref: np.ndarray, steps: np.ndarray | float,
+                       params: BicycleParams) -> np.ndarray:
+    """The controls (N, 2) [δ rad, a m/s²] that follow the route's curvature ``route_kappa`` (N,)
+    [1/m] at the reference speeds ``v_ref`` (N+1,) [m/s] over steps of ``steps`` (N,) [s] (or one
+    length), within the bicycle's limits."""
     delta = np.clip(np.arctan(params.l_f * route_kappa), -params.delta_max, params.delta_max)
-    acc = np.clip(np.diff(v_ref) / dt, params.a_min, params.a_max)
+    acc = np.clip(np.diff(v_ref) / steps, params.a_min, params.a_max)
     return np.stack([delta, acc], axis=1)
 
 
-def braking(v0: float, H: int, dt: float, params: BicycleParams) -> tuple[float, float]:
-    """Distance [m] and speed [m/s] after H steps of full braking from ``v0`` (no reversing)."""
-    v = v0 + params.a_min * dt * np.arange(1, H + 1)
-    t_stop = v0 / -params.a_min
-    T = min(H * dt, t_stop)
-    return v0 * T + 0.5 * params.a_min * T * T, max(float(v[-1]), 0.0)
+def braking(v0: float, n: int, dt: float, params: BicycleParams) -> tuple[float, float]:
+    """Distance [m] and speed [m/s] after ``n`` periods ``dt`` [s] of full braking from ``v0``
+    (no reversing)."""
+    T = min(n * dt, v0 / -params.a_min)
+    return v0 * T + 0.5 * params.a_min * T * T, max(v0 + params.a_min * dt * n, 0.0)
 
 
-def _reference_to(route: Route, s0: float, v0: float, H: int, dt: float, s_end: float, decel: float,
+def _reference_to(route: Route, s0: float, v0: float, steps: Sequence[float], s_end: float, decel: float,
                   a_max: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
-    """Like :meth:`~twolevel.world.geometry.Route.reference`, but ending with a stop at
-    ``s_end`` [m]: the target speed is at most sqrt(2·``decel``·(s_end − s)), the reference brakes
-    as hard as reaching it needs, and positions never pass ``s_end``."""
-    s = np.empty(H + 1)
-    v = np.empty(H + 1)
+    """Like :meth:`~twolevel.world.geometry.Route.reference` over the step lengths ``steps`` [s],
+    but ending with a stop at ``s_end`` [m]: the target speed is at most
+    sqrt(2·``decel``·(s_end − s)), the reference brakes as hard as reaching it needs, and
+    positions never pass ``s_end``."""
+    N = len(steps)
+    s = np.empty(N + 1)
+    v = np.empty(N + 1)
     s[0], v[0] = s0, v0
-    for k in range(H):  # H ≈ 10 scalar steps
+    for k, dt in enumerate(steps):  # N ≈ 10–20 scalar steps
         d = max(s_end - s[k], 0.0)
         target = min(float(route.desired_speed_at(s[k])), math.sqrt(2.0 * decel * d))
         need = v[k] * v[k] / (2.0 * max(d, 1e-3))
@@ -87,23 +91,24 @@ def _reference_to(route: Route, s0: float, v0: float, H: int, dt: float, s_end: 
 def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, settings: MPCSettings,
               params: BicycleParams, *, memory: StopMemory | None = None, s_hint: float | None = None,
               stop_rules: tuple[bool, bool] = (False, False)) -> Reference:
-    """The reference at time ``t`` [s] for ego state ``x0`` = (X, Y, ψ, v): the ego is projected
-    near ``s_hint`` [m] when given (else onto the whole route); ``stop_rules`` = (a rule reads
-    d_stop, a rule reads light_red/d_light) says which lines the reference stops before (at
-    ``settings.stop_decel``, ``settings.stop_margin`` before the line)."""
-    H, dt = settings.H, settings.dt
+    """The reference at time ``t`` [s] for ego state ``x0`` = (X, Y, ψ, v) over the look-ahead of
+    ``settings``: the ego is projected near ``s_hint`` [m] when given (else onto the whole
+    route); ``stop_rules`` = (a rule reads d_stop, a rule reads light_red/d_light) says which
+    lines the reference stops before (at ``settings.stop_decel``, ``settings.stop_margin``
+    before the line)."""
+    steps, dt = settings.steps, settings.dt
     route = world.route
     if s_hint is not None and math.isfinite(s_hint):
         s_arr, e_arr = route.project_near(x0[None, :2], np.array([s_hint]), 15.0)
     else:
         s_arr, e_arr = route.local_coordinates(x0[None, :2])
     s0 = float(s_arr[0])
-    s_ref, v_ref = route.reference(s0, max(float(x0[3]), 0.0), H, dt)
-    hc = horizon_constants(world, traffic, t, x0, H=H, dt=dt, s_pred=s_ref, memory=memory,
-                           station=(s0, float(e_arr[0])))
+    s_ref, v_ref = route.reference(s0, max(float(x0[3]), 0.0), len(steps), steps)
+    hc = horizon_constants(world, traffic, t, x0, dt=dt, s_pred=s_ref, memory=memory, station=(s0, float(e_arr[0])),
+                           ticks=np.asarray(settings.ticks))
     # the reference ends with a stop where the plan must stop: the goal (when the route stops
     # there) and a stop line / red light a rule guards that full braking can still stop before
-    d_brake, v_brake = braking(float(x0[3]), H, dt, params)
+    d_brake, v_brake = braking(float(x0[3]), settings.ticks[-1], dt, params)
     s_end = float(route.s[-1]) if route.v_des.size and route.v_des[-1] <= 1e-9 else math.inf
     if any(stop_rules):
         lines = stop_lines(hc, stop=stop_rules[0], light=stop_rules[1])
@@ -111,7 +116,7 @@ def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, set
         if s0 + d_brake <= s_near + 1e-6:
             s_end = min(s_end, max(s_near - settings.stop_margin, s0))
     if math.isfinite(s_end):
-        s_ref, v_ref = _reference_to(route, s0, max(float(x0[3]), 0.0), H, dt, s_end, settings.stop_decel)
+        s_ref, v_ref = _reference_to(route, s0, max(float(x0[3]), 0.0), steps, s_end, settings.stop_decel)
         hc = replace(hc, s_ref=s_ref, v_max=route.limit_at(s_ref).astype(float))
     v_ref = np.minimum(v_ref, route.limit_at(s_ref))
     pts = route.position(s_ref)

@@ -39,7 +39,7 @@ def plan_robustness(rules: Sequence[MpcRule], step: StepData, asm: Assembled, x:
     evaluate it); ``dt`` [s]."""
     sig = plan_signals(asm, x)
     P = asm.layout.P
-    others = step.hc.xy  # (n, H+1, 2)
+    others = step.hc.xy[:, :asm.layout.H + 1]  # (n, H+1, 2): the fine part the rules read
 
     def cf(signals: Mapping[str, np.ndarray], d: np.ndarray) -> np.ndarray:
         T = len(signals["x"])

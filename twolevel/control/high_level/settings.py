@@ -3,17 +3,83 @@
 Passed whole to the functions of one step (:func:`~twolevel.control.high_level.linearisation.prepare_step`,
 :func:`~twolevel.control.high_level.problem.assemble`, :func:`~twolevel.control.high_level.template.refresh`
 and the solve paths of :mod:`twolevel.control.high_level.solvers`). The NMPC baseline reads
-the horizon, the period and the weights.
+the fine part of the horizon, the period and the weights.
+
+**The look-ahead** (:func:`look_ahead_periods`): H steps of the period dt (the *fine part*, the
+paper's H = 10 at dt = 0.1 s), then *coarse* steps up to ``horizon_s`` (default
+:data:`DEFAULT_HORIZON_S`; coarse steps of :data:`COARSE_PERIODS` periods, the last one shorter
+when the rest is not a multiple, or an explicit list ``coarse_steps``). Every step is a whole
+number of periods, so each coarse step boundary is a sample time of the rules' grid. The rules
+are judged on the fine part only (their STL semantics count steps of dt; a formula looking
+further than H·dt is reported by ``twolevel check``); the coarse part carries the dynamics (each
+step discretised exactly for its length), the drivable band, the speed bounds (the limit in
+force when a rule reads ``v_max``, and what the car can see) and RSS's distance to the vehicle
+ahead (:mod:`twolevel.control.high_level.guards`). ``horizon_s`` = H·dt is the paper's uniform
+horizon. Pure Python: ``twolevel check`` validates a scenario's ``controller:`` section with it.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field, replace
+from typing import Any, Sequence
 
-__all__ = ["Weights", "MPCSettings", "SOLVERS"]
+__all__ = ["Weights", "MPCSettings", "SOLVERS", "DEFAULT_HORIZON_S", "COARSE_PERIODS", "MAX_COARSE_STEPS",
+           "look_ahead_periods"]
 
 SOLVERS = ("modes", "highs", "gurobi")
 """The solve paths (:mod:`twolevel.control.high_level.solvers`)."""
+
+DEFAULT_HORIZON_S = 5.0
+"""[s] The default look-ahead: long enough to stop from the speeds of the paper's scenarios with
+a comfortable deceleration (14 m/s at 4 m/s² takes 3.5 s), and the horizon of the fail-safe
+verification's fine intervals and more (:mod:`twolevel.safety.verify`)."""
+
+COARSE_PERIODS = 5
+"""Periods per coarse step by default (0.5 s at the paper's dt = 0.1 s)."""
+
+MAX_COARSE_STEPS = 50
+"""At most that many coarse steps (each adds a step of columns and rows to every MPC model)."""
+
+
+def _periods(value: float, dt: float, what: str) -> int:
+    """``value`` [s] as a whole number ≥ 1 of periods ``dt`` [s]; ValueError otherwise."""
+    n = round(value / dt)
+    if n < 1 or abs(value - n * dt) > 1e-6 * max(1.0, abs(value)):
+        raise ValueError(f"{what} = {value:g} s is not a whole number of periods dt = {dt:g} s")
+    return int(n)
+
+
+def look_ahead_periods(H: int, dt: float, horizon_s: float | None = None, coarse_dt: float | None = None,
+                     coarse_steps: Sequence[float] | None = None) -> tuple[int, ...]:
+    """The MPC's step lengths as whole numbers of periods dt [s]: ``H`` steps of one period, then coarse steps up to
+    ``horizon_s`` [s] (None: the larger of :data:`DEFAULT_HORIZON_S` and H·dt, or H·dt plus the
+    explicit ``coarse_steps``), each ``coarse_dt`` [s] long (None: :data:`COARSE_PERIODS`·dt) with
+    a shorter last one when the rest is not a multiple, or exactly ``coarse_steps`` [s]. Raises
+    ValueError (a message naming the setting) for lengths that are not whole numbers of periods,
+    a look-ahead shorter than the fine part, both ``coarse_dt`` and ``coarse_steps``, a
+    ``horizon_s`` that disagrees with ``coarse_steps``, or more than :data:`MAX_COARSE_STEPS`."""
+    if coarse_dt is not None and coarse_steps is not None:
+        raise ValueError("give coarse_dt or coarse_steps, not both")
+    fine = H * dt
+    if coarse_steps is not None:
+        periods = [_periods(float(c), dt, "a coarse step") for c in coarse_steps]
+        if horizon_s is not None and _periods(horizon_s, dt, "horizon_s") != H + sum(periods):
+            raise ValueError(f"horizon_s = {horizon_s:g} s differs from H·dt + the coarse steps = "
+                             f"{fine + sum(periods) * dt:g} s")
+    else:
+        if horizon_s is None:
+            total = max(round(DEFAULT_HORIZON_S / dt), H)
+        else:
+            total = _periods(horizon_s, dt, "horizon_s")
+            if total < H:
+                raise ValueError(f"horizon_s = {horizon_s:g} s is shorter than the fine part H·dt = {fine:g} s")
+        c = COARSE_PERIODS if coarse_dt is None else _periods(coarse_dt, dt, "coarse_dt")
+        rest = total - H
+        periods = [c] * (rest // c) + ([rest % c] if rest % c else [])
+    if len(periods) > MAX_COARSE_STEPS:
+        raise ValueError(f"{len(periods)} coarse steps; at most {MAX_COARSE_STEPS} (use longer coarse steps)")
+    return (1,) * H + tuple(periods)
 
 
 @dataclass(frozen=True)
@@ -33,9 +99,16 @@ class MPCSettings:
     """Everything one MPC step is configured by (one docstring per field)."""
 
     H: int = 10
-    """Horizon [steps]."""
+    """The fine part of the horizon [steps of dt], where the rules are judged."""
     dt: float = 0.1
     """Period [s]."""
+    horizon_s: float | None = None
+    """[s] The whole look-ahead (:func:`look_ahead_periods`; None: its default); H·dt: the paper's
+    uniform horizon."""
+    coarse_dt: float | None = None
+    """[s] Length of the coarse steps (None: :data:`COARSE_PERIODS` periods)."""
+    coarse_steps: tuple[float, ...] | None = None
+    """[s] The coarse steps' lengths, explicitly (instead of ``coarse_dt``)."""
     weights: Weights = Weights()
     """Cost weights."""
     solver: str = "modes"
@@ -72,3 +145,50 @@ class MPCSettings:
     """[m] How far before such a line the plan stops."""
     band: bool = True
     """Keep the lateral offset within the lanes that run the route's way."""
+    rss: bool = True
+    """Keep RSS's safe distance (plus the world's D_safe) behind the vehicle ahead within the
+    sensing range from the last fine step to the end of the look-ahead (conservative linear rows,
+    :func:`twolevel.control.high_level.guards.rss_guard`)."""
+    periods: tuple[int, ...] = field(init=False, repr=False, compare=False)
+    """The steps of the whole look-ahead in periods dt (:func:`look_ahead_periods`; the first H are 1)."""
+
+    def __post_init__(self) -> None:
+        if self.H < 1 or not (self.dt > 0 and math.isfinite(self.dt)):
+            raise ValueError(f"the horizon needs H ≥ 1 and dt > 0 (H = {self.H}, dt = {self.dt:g} s)")
+        cs = None if self.coarse_steps is None else tuple(float(c) for c in self.coarse_steps)
+        object.__setattr__(self, "coarse_steps", cs)
+        object.__setattr__(self, "periods", look_ahead_periods(self.H, self.dt, self.horizon_s, self.coarse_dt, cs))
+
+    @property
+    def N(self) -> int:
+        """Steps of the whole look-ahead (H fine, then the coarse ones)."""
+        return len(self.periods)
+
+    @property
+    def steps(self) -> tuple[float, ...]:
+        """[s] The step lengths of the whole look-ahead (n·dt for a step of n periods)."""
+        return tuple(n * self.dt for n in self.periods)
+
+    @property
+    def ticks(self) -> tuple[int, ...]:
+        """The sample times k = 0..N of the look-ahead in periods from now (0 first)."""
+        out = [0]
+        for n in self.periods:
+            out.append(out[-1] + n)
+        return tuple(out)
+
+    @property
+    def look_ahead(self) -> float:
+        """[s] The whole look-ahead."""
+        return self.ticks[-1] * self.dt
+
+    @classmethod
+    def of_world(cls, ws: Any, **fields: Any) -> "MPCSettings":
+        """Settings with a world's horizon (H, dt and the look-ahead) and RSS switch, from its
+        :class:`~twolevel.world.world.Settings` ``ws``; ``fields`` set the others."""
+        return cls(H=ws.H, dt=ws.dt, horizon_s=ws.horizon_s, coarse_dt=ws.coarse_dt, coarse_steps=ws.coarse_steps,
+                   rss=ws.rss, **fields)
+
+    def uniform(self) -> "MPCSettings":
+        """The same settings over the fine part only (the paper's H steps of dt)."""
+        return replace(self, horizon_s=self.H * self.dt, coarse_dt=None, coarse_steps=None)

@@ -64,7 +64,7 @@ class SolvePath(Protocol):
 
 
 def _point(asm: Assembled, states: np.ndarray, controls: np.ndarray | None = None) -> np.ndarray:
-    """A full model point with the states (H, 4) for k = 1..H (and controls) filled in, the rest 0."""
+    """A full model point with the states (N, 4) for k = 1..N (and controls) filled in, the rest 0."""
     x = np.zeros(asm.model.n_cols)
     x[asm.layout.x.ravel()] = states.ravel()
     if controls is not None:
@@ -72,12 +72,12 @@ def _point(asm: Assembled, states: np.ndarray, controls: np.ndarray | None = Non
     return x
 
 
-def seed_points(step: StepData, asm: Assembled, route: Route, dt: float, warm: bool) -> list[np.ndarray]:
+def seed_points(step: StepData, asm: Assembled, route: Route, warm: bool) -> list[np.ndarray]:
     """Trajectories to read modes off: the previous plan shifted (``warm``: the linearisation
     point is that plan), the reference, the reference shifted one lane left and right, and a
-    stay-behind reference for the vehicle ahead; ``dt`` [s]."""
+    stay-behind reference for the vehicle ahead."""
     pts = []
-    H = step.A.shape[0]
+    H, N = step.H, step.N
     if warm:
         pts.append(_point(asm, step.xs_bar[1:], step.us_bar))
     om = step.omega
@@ -85,7 +85,7 @@ def seed_points(step: StepData, asm: Assembled, route: Route, dt: float, warm: b
     normal = np.stack([-np.sin(om[:, 2]), np.cos(om[:, 2])], axis=1)
     for side in (1.0, -1.0):
         shifted = om.copy()
-        ramp = np.minimum(1.0, np.arange(1, H + 1) / max(H / 2, 1))[:, None]
+        ramp = np.minimum(1.0, np.arange(1, N + 1) / max(H / 2, 1))[:, None]
         shifted[:, :2] += side * step.lane_width * ramp * normal
         pts.append(_point(asm, shifted))
     hc = step.hc
@@ -94,7 +94,8 @@ def seed_points(step: StepData, asm: Assembled, route: Route, dt: float, warm: b
         s_cap = np.minimum(step.s_ref[1:], np.maximum(hc.s_lead[1:] - gap, step.s_bar[0]))
         behind = om.copy()
         behind[:, :2] = route.position(s_cap)
-        behind[:, 3] = np.minimum(om[:, 3], np.maximum(np.diff(np.concatenate([[step.s_bar[0]], s_cap])) / dt, 0))
+        behind[:, 3] = np.minimum(om[:, 3], np.maximum(np.diff(np.concatenate([[step.s_bar[0]], s_cap])) / step.steps,
+                                                       0))
         pts.append(_point(asm, behind))
     return pts
 
@@ -110,7 +111,7 @@ class ModeSearchPath:
               warm: bool) -> Attempt:
         st = self.settings
         capped = st.time_limit is not None
-        pts = seed_points(step, asm, self.route, st.dt, warm)
+        pts = seed_points(step, asm, self.route, warm)
         # with a previous plan, its shifted modes are the warm start; the reference-based
         # seeds come after the branch-and-bound (measured: under the QP cap the B&B reaches
         # the optimum in fewer QPs than they spend), and first when there is no previous plan

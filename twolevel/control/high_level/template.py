@@ -36,7 +36,7 @@ from twolevel.compiler.types import Emission
 from twolevel.control.high_level.backend import Backend
 from twolevel.control.high_level.linearisation import StepData
 from twolevel.control.high_level.problem import (Assembled, StepRules, dynamics_values, guard_values, input_bounds,
-                                                 others_of, set_cost, trace_signals)
+                                                 others_of, rss_bounds, set_cost, trace_signals)
 from twolevel.control.high_level.settings import MPCSettings
 from twolevel.models.params import BicycleParams
 
@@ -113,8 +113,7 @@ def refresh(tpl: StepTemplate, step: StepData, rules: StepRules, settings: MPCSe
     dt, eps = settings.dt, settings.eps
     asm = tpl.asm
     m, lay = asm.model, asm.layout
-    H = lay.x.shape[0]
-    n_sig = 6 * H
+    n_sig = lay.x.size + lay.u.size + lay.rss.size  # the columns before the encoder's
     sigs = trace_signals(step, lay, n_sig, past, rules.names | {"x", "y"})
     if signal_kinds(sigs) != signal_kinds(asm.signals):
         return None
@@ -123,10 +122,11 @@ def refresh(tpl: StepTemplate, step: StepData, rules: StepRules, settings: MPCSe
     ub[lay.x.ravel()] = step.hi.ravel()
     u_lo, u_hi = input_bounds(step, params)
     lb[lay.u.ravel()], ub[lay.u.ravel()] = u_lo.ravel(), u_hi.ravel()
+    ub[lay.rss] = rss_bounds(step)
     P = lay.P
     cf = collision_free_builtin("x", "y", others_of(step, P), ids=np.asarray(step.hc.index, np.int64),
                                 pad=settings.pad)
-    ev = Evaluator(TraceSignals(sigs, P + 1 + H), dt, IntervalBounds(Box(lb, ub)), builtins={"collision_free": cf},
+    ev = Evaluator(TraceSignals(sigs, P + 1 + lay.H), dt, IntervalBounds(Box(lb, ub)), builtins={"collision_free": cf},
                    stable=True)
     writes: list[tuple[Emission, np.ndarray, np.ndarray, np.ndarray | None]] = []
     it = iter(tpl.emissions)

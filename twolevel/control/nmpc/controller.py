@@ -8,9 +8,12 @@ engine can swap it in::
     res  = ctrl.solve(ego, t, world_state, history)                     # -> PlanResult
     ctrl.reset()
 
-Same horizon H, period dt, waypoints ω (:func:`twolevel.control.high_level.linearisation.prepare_step`,
-the high level's own) and cost with the weights of ``settings.weights``; the rules that can be
-written smoothly become constraints, chosen from what the rule sets read:
+Same fine horizon H, period dt, waypoints ω (:func:`twolevel.control.high_level.linearisation.prepare_step`,
+the high level's own) and cost with the weights of ``settings.weights``: the baseline plans over
+H steps of dt, as the paper's does, not over the MPC's longer look-ahead
+(``settings.uniform()``). The speed the ego can stop from within its sensing range bounds every
+step (as the MPC's, :func:`~twolevel.control.high_level.linearisation.sensing_bound`). The rules
+that can be written smoothly become constraints, chosen from what the rule sets read:
 
 * a rule reading ``v_max``: v_k ≤ v_max,k (the limit at the predicted positions), relaxed to
   what full braking allows when the ego is already too fast (v_0 + a_min·k·dt);
@@ -46,14 +49,14 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Mapping, Sequence
 
 import numpy as np
 
 from twolevel.control.codes import MIL515, MIL530
 from twolevel.control.high_level.guards import stop_lines
-from twolevel.control.high_level.linearisation import StepData, prepare_step
+from twolevel.control.high_level.linearisation import StepData, prepare_step, sensing_bound
 from twolevel.control.high_level.settings import MPCSettings
 from twolevel.control.nmpc.nlp import MODELS, NlpSolution, NmpcProblem
 from twolevel.control.planner import (EgoState, PlanResult, PlanStatus, Snapshot, WorldState, planner_of_world,
@@ -120,7 +123,7 @@ class NmpcController:
         if model not in MODELS:
             raise ValueError(f"unknown NMPC model {model!r}; choose one of {', '.join(MODELS)}")
         self.world = world
-        self.settings = settings or MPCSettings(H=world.settings.H, dt=world.settings.dt)
+        self.settings = replace((settings or MPCSettings.of_world(world.settings)).uniform(), rss=False)
         self.model = model
         self.params = params or BicycleParams()
         self.vehicle = vehicle or VehicleParams().with_overrides(
@@ -165,7 +168,7 @@ class NmpcController:
                    params: BicycleParams | None = None, options: NmpcOptions | None = None
                    ) -> tuple["NmpcController | None", list[Diagnostic]]:
         """The NMPC of a scenario's world with its own rule files and settings."""
-        st = settings or MPCSettings(H=world.settings.H, dt=world.settings.dt, time_limit=world.settings.time_limit)
+        st = settings or MPCSettings.of_world(world.settings, time_limit=world.settings.time_limit)
         return planner_of_world(cls, world, st, params, model=model, options=options)
 
     @property
@@ -212,6 +215,8 @@ class NmpcController:
         vb = np.full(H, 1e3)
         if self.speed:
             vb = np.maximum(hc.v_max[1:], float(x0[3]) + self.params.a_min * dt * k + 0.05)
+        ws = self.world.settings  # what the ego can stop from within its sensing range
+        vb = np.minimum(vb, sensing_bound(float(x0[3]), np.arange(H + 1), dt, ws.v_sense, ws.response.brake_min))
         # stop lines: the nearest line that applies at step k (inf: none)
         s_line = stop_lines(hc, stop=self.stop, light=self.light)[1:]  # the high level's definition
         stop = np.tile([0.0, 0.0, 1.0, 0.0], (H, 1))
