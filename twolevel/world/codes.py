@@ -41,4 +41,9 @@ YML427 = Code("YML427", "goal-out-of-reach", W, "The goal cannot be reached with
 YML428 = Code("YML428", "duplicate-rule", E,
               "Two rules of a scenario share a name: two rule files define it, or one file is listed twice.")
 
+YML430 = Code("YML430", "look-ahead-invalid", E,
+              "The MPC's look-ahead (horizon_s, coarse_dt, coarse_steps) is not whole periods or contradicts itself.")
+YML431 = Code("YML431", "sensing-short", W,
+              "The sensing range is shorter than the stopping distance at the speeds the scenario allows.")
+
 __all__ = [name for name in dir() if name.startswith("YML")]
