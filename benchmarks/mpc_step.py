@@ -8,7 +8,10 @@ vehicle ahead in the ego's lane, so overtaking is the right choice. The run is d
 optimum). Per path: median / p95 / p99 of the total step time and of each phase, binaries, rows,
 QPs per step, the share of steps within 1 % of the exact optimum, and highs/modes time ratios.
 Rules: the shipped speed limit and safe distance (collision_free(D_safe = 1 m), time-headway gap)
-plus staying on the road. Usage: ``python benchmarks/mpc_step.py [--quick] [--steps N]``.
+plus staying on the road. The look-ahead is the default (10 steps of 0.1 s, then coarse steps to
+5 s, with RSS's terminal distance); ``--horizon-s 1 --no-rss`` is the paper's horizon alone, for
+comparing. Usage: ``python benchmarks/mpc_step.py [--quick] [--steps N] [--horizon-s S]
+[--coarse-dt S] [--no-rss]``.
 """
 
 from __future__ import annotations
@@ -78,12 +81,13 @@ def pct(a, q):
     return float(np.percentile(a, q)) if len(a) else float("nan")
 
 
-def run(n: int, steps: int, seed: int, tmp: Path, exact: bool) -> dict:
+def run(n: int, steps: int, seed: int, tmp: Path, exact: bool, look: dict) -> dict:
     w = world_with(n, seed, tmp)
     sets = rulesets(tmp)
-    ctl = {p: HighLevelController(w, sets, MPCSettings(solver=p, time_limit=0.1 if p == "modes" else 1.0, monitor=False))
+    ctl = {p: HighLevelController(w, sets, MPCSettings(solver=p, time_limit=0.1 if p == "modes" else 1.0, monitor=False,
+                                                       **look))
            for p in ("modes", "highs")}
-    ref = HighLevelController(w, sets, MPCSettings(solver="modes", time_limit=None, monitor=False))
+    ref = HighLevelController(w, sets, MPCSettings(solver="modes", time_limit=None, monitor=False, **look))
     e = w.ego
     x = np.array([e.x, e.y, e.psi, e.v])
     tr = w.traffic0
@@ -157,7 +161,12 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="fewer steps and vehicle counts")
     ap.add_argument("--steps", type=int, default=None, help="MPC steps per run")
     ap.add_argument("--no-exact", action="store_true", help="skip the offline exact optimum")
+    ap.add_argument("--horizon-s", type=float, default=None, help="the look-ahead [s] (default 5; 1: the paper's)")
+    ap.add_argument("--coarse-dt", type=float, default=None, help="length of the coarse steps [s] (default 0.5)")
+    ap.add_argument("--no-rss", action="store_true", help="without RSS's terminal distance")
     a = ap.parse_args()
+    look = {"horizon_s": a.horizon_s, "coarse_dt": a.coarse_dt, "rss": not a.no_rss}
+    print(f"look-ahead: {MPCSettings(**look).steps} s, RSS terminal {'off' if a.no_rss else 'on'}")
     import clarabel
     import highspy  # noqa: F401
     print(f"machine: {platform.machine()} {platform.processor() or ''} cpus={os.cpu_count()} | "
@@ -174,7 +183,7 @@ def main() -> None:
         tmp = Path(d)
         for n in ns:
             t0 = time.perf_counter()
-            rec = run(n, steps, seed=n, tmp=tmp, exact=not a.no_exact)
+            rec = run(n, steps, seed=n, tmp=tmp, exact=not a.no_exact, look=look)
             summarize(n, rec)
             print(f"  (run took {time.perf_counter() - t0:.1f} s)")
 

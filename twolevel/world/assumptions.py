@@ -66,8 +66,8 @@ from typing import Any, Mapping, Sequence
 
 __all__ = [
     "VEHICLE", "CYCLIST", "PEDESTRIAN", "KIND_NAMES", "MotionBounds", "ResponseBounds", "Assumptions",
-    "VEHICLE_BOUNDS", "CYCLIST_BOUNDS", "PEDESTRIAN_BOUNDS", "RSS_BOUNDS", "safe_distance", "stopping_speed", "kinds_of",
-    "from_spec", "tighter_than_default",
+    "VEHICLE_BOUNDS", "CYCLIST_BOUNDS", "PEDESTRIAN_BOUNDS", "RSS_BOUNDS", "safe_distance", "safe_speed",
+    "stopping_speed", "kinds_of", "from_spec", "tighter_than_default",
 ]
 
 VEHICLE, CYCLIST, PEDESTRIAN = 0, 1, 2
@@ -144,17 +144,23 @@ def safe_distance(v_rear: Any, v_front: Any, r: ResponseBounds = RSS_BOUNDS) -> 
     return (d + abs(d)) / 2  # max(0, d), exactly, for numbers and arrays alike
 
 
-def stopping_speed(distance: float, r: ResponseBounds = RSS_BOUNDS) -> float:
-    """The largest speed [m/s] of a rear car whose :func:`safe_distance` behind a standing one
-    is at most ``distance`` [m]: responding within ρ (at up to accel_max), then braking at
-    brake_min, it stops within ``distance``. 0 when even a standing rear car needs more."""
+def safe_speed(gap: float, v_front: float = 0.0, r: ResponseBounds = RSS_BOUNDS) -> float:
+    """The largest speed [m/s] of a rear car whose :func:`safe_distance` behind a front car at
+    ``v_front`` [m/s] is at most ``gap`` [m] (the inverse of safe_distance in the rear car's
+    speed); 0 when even a standing rear car needs more."""
     rho, acc, b = r.time, r.accel_max, r.brake_min
-    # v·ρ + acc·ρ²/2 + (v + ρ·acc)²/(2b) = distance, a quadratic in v
-    c = 0.5 * acc * rho**2 + (rho * acc) ** 2 / (2 * b) - distance
+    # v·ρ + acc·ρ²/2 + (v + ρ·acc)²/(2b) − v_front²/(2·brake_max) = gap, a quadratic in v
+    c = 0.5 * acc * rho**2 + (rho * acc) ** 2 / (2 * b) - v_front**2 / (2 * r.brake_max) - gap
     if c >= 0:
         return 0.0
     p = rho + rho * acc / b  # v²/(2b) + p·v + c = 0
     return (-p + math.sqrt(p * p - 2 * c / b)) * b
+
+
+def stopping_speed(distance: float, r: ResponseBounds = RSS_BOUNDS) -> float:
+    """The largest speed [m/s] of a rear car that stops within ``distance`` [m] behind a
+    standing one (responding within ρ at up to accel_max, then braking at brake_min)."""
+    return safe_speed(distance, 0.0, r)
 
 
 def kinds_of(ids: Sequence[str], a: Assumptions) -> list[int]:

@@ -504,7 +504,7 @@ def _check_controller(spec: ScenarioFile, doc: Document, m: MapFile, succ: dict[
     its sensing range from the speeds the scenario allows: it will then keep below the speed it
     can stop from (:class:`Sensing`), slower than the scenario asks."""
     from twolevel.control.high_level.settings import look_ahead_periods
-    from twolevel.safety.assumptions import safe_distance
+    from twolevel.world.assumptions import safe_distance
 
     c = spec.controller
     out: list[Diagnostic] = []

@@ -254,7 +254,9 @@ class HorizonConstants:
     in the ego's lane within the sensing range (−1 if none; ``lead``'s vehicle when that is within
     r_near), ``s_ahead`` (H+1,) [m] its predicted route position, ``v_ahead`` [m/s] its speed along
     the route, ``e_ahead`` [m] its lateral offset from the route and ``ahead_offset`` [m] =
-    (L_ego + L_ahead)/2 (``rss_gap``'s vehicle).
+    (L_ego + L_ahead)/2 (``rss_gap``'s vehicle). Every vehicle within the sensing range: ``seen``
+    (m,) participant indices, ``seen_s``/``seen_e`` (m,) [m] route coordinates now, ``seen_v``
+    (m,) [m/s] speeds along the route (< 0 against it).
     """
 
     t: np.ndarray
@@ -277,6 +279,10 @@ class HorizonConstants:
     v_ahead: float = 0.0
     ahead_offset: float = 0.0
     e_ahead: float = 0.0
+    seen: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    seen_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    seen_e: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    seen_v: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 def horizon_constants(
@@ -333,6 +339,7 @@ def horizon_constants(
     rng = max(world.settings.sensor_range, r_near)
     seen = np.flatnonzero(traffic.active & (dist <= rng))
     ahead, s_ahead, v_ahead, ahead_offset, e_ahead = -1, np.full(H + 1, np.inf), 0.0, 0.0, 0.0
+    si, ei, along = np.zeros(0), np.zeros(0), np.zeros(0)
     if len(seen):
         si, ei = route.project_near(traffic.xy[seen], np.full(len(seen), s0), sensing_window(world))
         mask, along = ahead_in_lane(route, si, ei, traffic.psi[seen], s0, e0)
@@ -349,4 +356,4 @@ def horizon_constants(
     return HorizonConstants(t, np.asarray(s_pred, dtype=float), v_max, s_stop, s_light, light_red, near, xy,
                             np.repeat(traffic.psi[near, None], H + 1, axis=1), world.parts.length[near],
                             world.parts.width[near], traffic.v[near], lead, s_lead, lead_offset, ahead, s_ahead,
-                            v_ahead, ahead_offset, e_ahead)
+                            v_ahead, ahead_offset, e_ahead, seen, si, ei, traffic.v[seen] * along)

@@ -25,7 +25,8 @@ and the NMPC baseline of :mod:`twolevel.control.nmpc`):
   lane within the sensing range is at least RSS's safe distance
   (:func:`twolevel.world.assumptions.safe_distance`, the ego as the rear car: its response
   time and braking, the assumed maximum braking of the vehicle ahead) plus a margin — *or* the
-  ego is beside it, in a lane of the drivable band (RSS's lateral safety: passing stays
+  ego is beside it, in a lane of the drivable band where it keeps RSS's distance to the
+  vehicles sensed in that lane (:func:`free_sides`; RSS's lateral safety: passing stays
   possible). The gap is s_ahead,N − s_0 − (distance travelled) − (L_ego + L_ahead)/2, as for the
   terminal stop (sideways motion does not shorten the distance travelled). RSS's distance is
   convex in v_N, so it lies below each of its chords over the interval the chord spans: K rows,
@@ -53,7 +54,7 @@ from twolevel.world.signals import HorizonConstants
 from twolevel.world.world import World
 
 __all__ = ["stop_lines", "can_stop_slope", "TerminalStop", "terminal_stop", "drivable_band", "RssTerminal",
-           "rss_terminal", "chord", "CHORD_HALF_WIDTH", "LATERAL_MARGIN"]
+           "rss_terminal", "free_sides", "chord", "CHORD_HALF_WIDTH", "LATERAL_MARGIN"]
 
 CHORD_HALF_WIDTH = 0.5
 """[m/s] w: half the width of the chord of RSS's distance around the linearisation's speed."""
@@ -180,15 +181,42 @@ class RssTerminal:
     gap0: float = float("inf")
 
 
+def free_sides(world: World, hc: HorizonConstants, *, lateral: float, band: tuple[float, float], s_N: float,
+               v_N: float, T: float) -> tuple[bool, bool]:
+    """Whether the ego may be beside the vehicle ahead, left and right, at the end of the
+    look-ahead (``T`` [s] from now): that offset ``lateral`` [m] from the vehicle ahead's lies in
+    the drivable ``band`` (lo, hi) [m], and where the ego would then be (route position ``s_N``
+    [m], speed ``v_N`` [m/s]) it keeps RSS's distance to every vehicle sensed in that lane,
+    predicted at constant speed — behind one ahead of it (the ego's response,
+    ``world.settings.response``) and ahead of one behind it (the others' response,
+    ``world.assumptions.response``: whoever changes lanes leaves the follower its distance)."""
+    width = float(world.route.width_at(s_N))
+    out = []
+    for side in (1.0, -1.0):
+        e_side = hc.e_ahead + side * width
+        if not band[0] <= hc.e_ahead + side * lateral <= band[1]:
+            out.append(False)
+            continue
+        there = (np.abs(hc.seen_e - e_side) < width / 2) & (hc.seen_v > 0)
+        s_j = hc.seen_s[there] + hc.seen_v[there] * T
+        v_j = hc.seen_v[there]
+        gap = np.abs(s_j - s_N) - (world.ego.length + world.parts.length[hc.seen[there]]) / 2
+        need = np.where(s_j >= s_N, safe_distance(v_N, v_j, world.settings.response),
+                        safe_distance(v_j, v_N, world.assumptions.response)) + world.settings.D_safe
+        out.append(bool(np.all(gap >= need)))
+    return out[0], out[1]
+
+
 def rss_terminal(hc: HorizonConstants, response: ResponseBounds, *, s0: float, v0: float, steps: np.ndarray, H: int,
                  v_lo: np.ndarray, v_hi: np.ndarray, v_bar: np.ndarray, margin: float, a_min: float,
-                 lateral: float, band: tuple[float, float], chords: int = 3) -> RssTerminal:
+                 lateral: float, sides: tuple[bool, bool], chords: int = 3) -> RssTerminal:
     """The terminal disjunction of the module docstring's *can stop behind the vehicle ahead*
     for a look-ahead of ``steps`` (N,) [s] from the ego at route position ``s0`` [m] and speed
     ``v0`` [m/s]: ``v_lo``/``v_hi`` (N,) [m/s] bound the speeds each step k = 1..N can reach,
     ``v_bar`` (N,) [m/s] are the linearisation's, ``margin`` [m] is kept beyond RSS's distance,
     ``a_min`` [m/s²] is full braking (< 0), ``lateral`` [m] the offset from the vehicle ahead's
-    that counts as beside it and ``band`` (lo, hi) [m] the drivable band at step N."""
+    that counts as beside it and ``sides`` (left, right) whether being beside is allowed
+    (:func:`free_sides`)."""
     N = len(steps)
     if hc.ahead < 0:
         return RssTerminal(np.zeros(chords), np.ones(chords), 0.0, 0.0, (True, True), False, np.full((H, 2), np.nan))
@@ -215,4 +243,4 @@ def rss_terminal(hc: HorizonConstants, response: ResponseBounds, *, s0: float, v
     e_left, e_right = hc.e_ahead + lateral, hc.e_ahead - lateral
     rule = np.stack(chord(f, v_lo[:H], np.maximum(v_hi[:H], v_lo[:H])), axis=1)
     gap0 = float(hc.s_ahead[0] - hc.ahead_offset - s0 - f(np.asarray(v0)))
-    return RssTerminal(slope, bound, e_left, e_right, (e_left <= band[1], e_right >= band[0]), True, rule, gap0)
+    return RssTerminal(slope, bound, e_left, e_right, sides, True, rule, gap0)

@@ -20,8 +20,8 @@ from typing import Mapping
 
 import numpy as np
 
-from twolevel.control.high_level.guards import (LATERAL_MARGIN, RssTerminal, TerminalStop, drivable_band, rss_terminal,
-                                                stop_lines, terminal_stop)
+from twolevel.control.high_level.guards import (RssTerminal, TerminalStop, drivable_band, rss_terminal, stop_lines,
+                                                terminal_stop)
 from twolevel.control.high_level.reference import reference, reference_controls, wrap_to
 from twolevel.control.high_level.settings import MPCSettings
 from twolevel.control.planner import PreviousPlan
@@ -242,10 +242,9 @@ def prepare_step(
     rss = None
     if settings.rss:
         v_lo = np.maximum(float(x0[3]) + params.a_min * dt * ticks[1:], 0.0)
-        lateral = 0.5 * (world.ego.width + float(world.parts.width[hc.ahead])) + LATERAL_MARGIN if hc.ahead >= 0 else 0.0
         rss = rss_terminal(hc, ws.response, s0=s0, v0=float(x0[3]), steps=steps, H=H, v_lo=v_lo, v_hi=hi[:, 3],
-                           v_bar=xs_bar[1:, 3], margin=ws.D_safe, a_min=params.a_min, lateral=lateral,
-                           band=(float(e_lo[-1]), float(e_hi[-1])))
+                           v_bar=xs_bar[1:, 3], margin=ws.D_safe, a_min=params.a_min, lateral=ref.lateral,
+                           sides=ref.sides)
     return StepData(t, x0, np.asarray(u_prev, float), xs_bar, us_bar, A, B, c, omega, s_ref, s_bar, h_bar, p_bar,
                     lo, hi, hc, width, e_lo, e_hi, term, steering_bound(np.maximum(xs_bar[:-1, 3], x0[3]),
                                                                         route.curvature_at(s_ref[:-1]), params),

@@ -240,12 +240,25 @@ def _box_range(n_hat: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[float
 
 
 def rss_bounds(step: StepData) -> np.ndarray:
-    """Upper bounds (3,) of the RSS terminal disjunction's binaries (behind, left, right): a
-    side the drivable band does not reach is switched off."""
+    """Upper bounds (3,) of the RSS terminal disjunction's binaries (behind, left, right): a side
+    the ego may not be beside the vehicle ahead on is switched off (every disjunct holds when
+    the disjunction is not in use: :func:`_rss_mode`)."""
     rss = step.rss
     if rss is None:
         return np.zeros(0)
-    return np.array([1.0, float(rss.sides[0] or not rss.active), float(rss.sides[1] or not rss.active)])
+    if _rss_mode(step) != "choice":
+        return np.ones(3)
+    return np.array([1.0, float(rss.sides[0]), float(rss.sides[1])])
+
+
+def _rss_mode(step: StepData) -> str:
+    """How the RSS terminal is written this step: ``"none"`` (no vehicle ahead: every RSS row
+    holds), ``"behind"`` (no side free: the behind rows as plain rows, the disjunction idle, so
+    the mode search's lower bound keeps them) or ``"choice"`` (the disjunction)."""
+    rss = step.rss
+    if rss is None or not rss.active:
+        return "none"
+    return "choice" if any(rss.sides) else "behind"
 
 
 def guard_values(step: StepData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -267,15 +280,21 @@ def guard_values(step: StepData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     lo = [step.e_lo + base, [-np.inf]]
     hi = [step.e_hi + base, [term_hi]]
     rss = step.rss
-    if rss is not None:  # the RSS terminal disjunction: behind (K rows), left, right, and its cover
+    if rss is not None:  # RSS at step N: K plain behind rows, then the disjunction behind | left | right
         K = len(rss.slope)
-        if rss.active:
+        mode = _rss_mode(step)
+        coef = np.broadcast_to(-trav, (K, N)).copy()  # behind: bound − slope·v_N − Σ w v ≥ 0
+        coef[:, -1] -= rss.slope
+        if mode == "behind":
+            vals.append(coef.ravel())
+            lo.append(-rss.bound)
+        else:
+            vals.append(np.zeros(K * N))
+            lo.append(np.full(K, -1.0))
+        if mode == "choice":  # each disjunct's rows relaxed by its M when its binary is 0
             n_N, b_N = n_hat[-1], float(base[-1])
             v_hi = step.hi[:, 3]
-            # behind: bound − slope·v_N − Σ w v ≥ 0, relaxed by M when its binary is 0
             m_b = np.maximum(0.0, rss.slope * v_hi[-1] + trav @ v_hi - rss.bound) + 1.0
-            coef = np.broadcast_to(-trav, (K, N)).copy()
-            coef[:, -1] -= rss.slope
             e_min, e_max = _box_range(n_N, step.lo[-1, :2], step.hi[-1, :2])
             m_l = max(0.0, rss.e_left + b_N - e_min) + 1.0
             m_r = max(0.0, e_max - rss.e_right - b_N) + 1.0
@@ -284,7 +303,7 @@ def guard_values(step: StepData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         else:  # every disjunct holds
             vals += [np.zeros(K * (N + 1) + 6), np.ones(3)]
             lo += [np.full(K + 2, -1.0), [1.0]]
-        hi += [np.full(K + 3, np.inf)]
+        hi += [np.full(2 * K + 3, np.inf)]
     return np.concatenate(vals), np.concatenate(lo), np.concatenate(hi)
 
 
@@ -296,18 +315,17 @@ def _guards(b: ModelBuilder, step: StepData, lay: Layout) -> None:
     rss = step.rss
     if rss is not None:
         K = len(rss.slope)
-        behind = N + 1 + np.arange(K)
-        rows += [np.repeat(behind, N + 1), np.full(3, N + 1 + K), np.full(3, N + 2 + K), np.full(3, N + 3 + K)]
-        cols += [np.tile(np.append(lay.x[:, 3], lay.rss[0]), K), np.append(lay.x[-1, :2], lay.rss[1]),
-                 np.append(lay.x[-1, :2], lay.rss[2]), lay.rss]
-        n_rows += K + 3
+        r0 = N + 1 + K  # the disjunction's first row, after the plain behind rows
+        rows += [np.repeat(N + 1 + np.arange(K), N), np.repeat(r0 + np.arange(K), N + 1), np.full(3, r0 + K),
+                 np.full(3, r0 + K + 1), np.full(3, r0 + K + 2)]
+        cols += [np.tile(lay.x[:, 3], K), np.tile(np.append(lay.x[:, 3], lay.rss[0]), K),
+                 np.append(lay.x[-1, :2], lay.rss[1]), np.append(lay.x[-1, :2], lay.rss[2]), lay.rss]
+        n_rows += 2 * K + 3
     vals, lo, hi = guard_values(step)
     g = b.add_rows("guard", n_rows, np.concatenate(rows), np.concatenate(cols), vals, lo, hi)
     if rss is not None:
-        K = len(rss.slope)
-        b.add_disjunction(Disjunction(len(b.disjunctions), lay.rss.copy(), (g[N + 1:N + 1 + K], g[[N + 1 + K]],
-                                                                             g[[N + 2 + K]]), int(g[N + 3 + K]),
-                                      label="rss terminal: behind | left | right"))
+        b.add_disjunction(Disjunction(len(b.disjunctions), lay.rss.copy(), (g[r0:r0 + K], g[[r0 + K]], g[[r0 + K + 1]]),
+                                      int(g[r0 + K + 2]), label="rss terminal: behind | left | right"))
 
 
 @dataclass(frozen=True, eq=False)

@@ -16,9 +16,10 @@ from typing import Sequence
 
 import numpy as np
 
-from twolevel.control.high_level.guards import stop_lines
+from twolevel.control.high_level.guards import LATERAL_MARGIN, drivable_band, free_sides, stop_lines
 from twolevel.control.high_level.settings import MPCSettings
 from twolevel.models.params import BicycleParams
+from twolevel.world.assumptions import ResponseBounds, safe_speed
 from twolevel.world.geometry import Route
 from twolevel.world.signals import HorizonConstants, StopMemory, horizon_constants
 from twolevel.world.traffic import TrafficState
@@ -32,8 +33,10 @@ class Reference:
     """The ego's station now (``s0``, ``e0`` [m] along and across the route), the waypoints'
     route positions ``s_ref`` (N+1,) [m] and speeds ``v_ref`` (N+1,) [m/s], the waypoints
     ``omega`` (N, 4) = (X, Y, ψ, v) for k = 1..N (the whole look-ahead), the solve-time constants
-    ``hc`` along them, and where full braking from now ends the look-ahead: ``d_brake`` [m]
-    further, at ``v_brake`` [m/s]."""
+    ``hc`` along them, where full braking from now ends the look-ahead: ``d_brake`` [m]
+    further, at ``v_brake`` [m/s], and whether the ego may end it beside the vehicle ahead,
+    ``sides`` (left, right), at ``lateral`` [m] from it
+    (:func:`twolevel.control.high_level.guards.free_sides`)."""
 
     s0: float
     e0: float
@@ -43,6 +46,8 @@ class Reference:
     hc: HorizonConstants
     d_brake: float
     v_brake: float
+    sides: tuple[bool, bool] = (False, False)
+    lateral: float = 0.0
 
 
 def wrap_to(angle: np.ndarray | float, ref: float) -> np.ndarray:
@@ -67,12 +72,26 @@ def braking(v0: float, n: int, dt: float, params: BicycleParams) -> tuple[float,
     return v0 * T + 0.5 * params.a_min * T * T, max(v0 + params.a_min * dt * n, 0.0)
 
 
+@dataclass(frozen=True)
+class Follow:
+    """The vehicle ahead the reference keeps RSS's distance behind: its predicted route position
+    ``s_front`` (N+1,) [m] less ``room`` [m] (half the two lengths and the margin kept), its speed
+    ``v_front`` [m/s] and the ego's RSS ``response``."""
+
+    s_front: np.ndarray
+    v_front: float
+    room: float
+    response: ResponseBounds
+
+
 def _reference_to(route: Route, s0: float, v0: float, steps: Sequence[float], s_end: float, decel: float,
-                  a_max: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
+                  a_max: float = 2.0, follow: Follow | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Like :meth:`~twolevel.world.geometry.Route.reference` over the step lengths ``steps`` [s],
-    but ending with a stop at ``s_end`` [m]: the target speed is at most
+    but ending with a stop at ``s_end`` [m] (+inf: none): the target speed is at most
     sqrt(2·``decel``·(s_end − s)), the reference brakes as hard as reaching it needs, and
-    positions never pass ``s_end``."""
+    positions never pass ``s_end``; and, ``follow``-ing a vehicle ahead, at most the speed whose
+    RSS distance is the gap to it (:func:`twolevel.world.assumptions.safe_speed`), braking at
+    up to the response's brake_min for it, never closer than ``follow.room``."""
     N = len(steps)
     s = np.empty(N + 1)
     v = np.empty(N + 1)
@@ -81,8 +100,13 @@ def _reference_to(route: Route, s0: float, v0: float, steps: Sequence[float], s_
         d = max(s_end - s[k], 0.0)
         target = min(float(route.desired_speed_at(s[k])), math.sqrt(2.0 * decel * d))
         need = v[k] * v[k] / (2.0 * max(d, 1e-3))
+        end = max(s_end, s[k])
+        if follow is not None:
+            target = min(target, safe_speed(follow.s_front[k] - follow.room - s[k], follow.v_front, follow.response))
+            need = max(need, follow.response.brake_min)
+            end = min(end, max(follow.s_front[k + 1] - follow.room, s[k]))
         v[k + 1] = min(max(target, v[k] - max(a_max, need) * dt, 0.0), v[k] + a_max * dt)
-        s[k + 1] = min(s[k] + 0.5 * (v[k] + v[k + 1]) * dt, max(s_end, s[k]))
+        s[k + 1] = min(s[k] + 0.5 * (v[k] + v[k + 1]) * dt, end)
         if s[k + 1] >= s_end - 1e-9:
             v[k + 1] = 0.0
     return s, v
@@ -95,7 +119,14 @@ def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, set
     ``settings``: the ego is projected near ``s_hint`` [m] when given (else onto the whole
     route); ``stop_rules`` = (a rule reads d_stop, a rule reads light_red/d_light) says which
     lines the reference stops before (at ``settings.stop_decel``, ``settings.stop_margin``
-    before the line)."""
+    before the line). With ``settings.rss``, when the ego may not end the look-ahead beside the
+    vehicle ahead sensed in its lane (:func:`~twolevel.control.high_level.guards.free_sides`,
+    judged where the desired speeds would take it), the reference keeps RSS's distance (and
+    D_safe) behind that vehicle, as the plan must at the end of the look-ahead
+    (:func:`~twolevel.control.high_level.guards.rss_terminal`): a reference that runs into it
+    would pull the plan's coarse steps against that row (and a linearised plan then swerves to
+    gain progress the row does not count). When it may, the reference keeps the desired speeds,
+    so that passing pays."""
     steps, dt = settings.steps, settings.dt
     route = world.route
     if s_hint is not None and math.isfinite(s_hint):
@@ -115,12 +146,21 @@ def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, set
         s_near = float(min(lines[0], lines[-1]))
         if s0 + d_brake <= s_near + 1e-6:
             s_end = min(s_end, max(s_near - settings.stop_margin, s0))
-    if math.isfinite(s_end):
-        s_ref, v_ref = _reference_to(route, s0, max(float(x0[3]), 0.0), steps, s_end, settings.stop_decel)
+    follow, sides, lateral = None, (False, False), 0.0
+    if settings.rss and hc.ahead >= 0:
+        lateral = 0.5 * (world.ego.width + float(world.parts.width[hc.ahead])) + LATERAL_MARGIN
+        lo, hi = drivable_band(world, s_ref[-1:])
+        sides = free_sides(world, hc, lateral=lateral, band=(float(lo[0]), float(hi[0])), s_N=float(s_ref[-1]),
+                           v_N=float(v_ref[-1]), T=settings.look_ahead)
+        if not any(sides):
+            follow = Follow(hc.s_ahead, hc.v_ahead, hc.ahead_offset + world.settings.D_safe, world.settings.response)
+    if math.isfinite(s_end) or follow is not None:
+        s_ref, v_ref = _reference_to(route, s0, max(float(x0[3]), 0.0), steps, s_end, settings.stop_decel,
+                                     follow=follow)
         hc = replace(hc, s_ref=s_ref, v_max=route.limit_at(s_ref).astype(float))
     v_ref = np.minimum(v_ref, route.limit_at(s_ref))
     pts = route.position(s_ref)
     head = wrap_to(route.heading_at(s_ref), float(x0[2]))
     head = x0[2] + np.concatenate([[0.0], np.cumsum(wrap_to(np.diff(head), 0.0))])
     omega = np.column_stack([pts[1:], head[1:], v_ref[1:]])
-    return Reference(s0, float(e_arr[0]), s_ref, v_ref, omega, hc, d_brake, v_brake)
+    return Reference(s0, float(e_arr[0]), s_ref, v_ref, omega, hc, d_brake, v_brake, sides, lateral)
