@@ -238,8 +238,8 @@ def rss_terminal(hc: HorizonConstants, response: ResponseBounds, *, s0: float, v
     for i in range(N):  # N ≈ 20 scalar steps
         vbrk[i + 1] = max(vbrk[i] + a_min * steps[i], 0.0)
     travelled = float(np.sum(0.5 * steps * (vbrk[:-1] + vbrk[1:]))) - share
-    miss = slope * vbrk[N] + travelled - bound
-    bound = bound + np.maximum(miss, 0.0) + np.where(miss > -0.05, 0.05, 0.0)
+    miss = slope * vbrk[N] + travelled - bound  # > 0: even full braking misses the row
+    bound = bound + np.maximum(miss, 0.0) + np.where(miss > -1e-6, 1e-6, 0.0)
     e_left, e_right = hc.e_ahead + lateral, hc.e_ahead - lateral
     rule = np.stack(chord(f, v_lo[:H], np.maximum(v_hi[:H], v_lo[:H])), axis=1)
     gap0 = float(hc.s_ahead[0] - hc.ahead_offset - s0 - f(np.asarray(v0)))

@@ -122,7 +122,8 @@ def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, set
     before the line). With ``settings.rss``, when the ego may not end the look-ahead beside the
     vehicle ahead sensed in its lane (:func:`~twolevel.control.high_level.guards.free_sides`,
     judged where the desired speeds would take it), the reference keeps RSS's distance (and
-    D_safe) behind that vehicle, as the plan must at the end of the look-ahead
+    D_safe) behind that vehicle — braking for it at ``settings.stop_decel`` at most, so it
+    slows down before RSS's braking would be needed —, as the plan must at the end of the look-ahead
     (:func:`~twolevel.control.high_level.guards.rss_terminal`): a reference that runs into it
     would pull the plan's coarse steps against that row (and a linearised plan then swerves to
     gain progress the row does not count). When it may, the reference keeps the desired speeds,
@@ -153,7 +154,10 @@ def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, set
         sides = free_sides(world, hc, lateral=lateral, band=(float(lo[0]), float(hi[0])), s_N=float(s_ref[-1]),
                            v_N=float(v_ref[-1]), T=settings.look_ahead)
         if not any(sides):
-            follow = Follow(hc.s_ahead, hc.v_ahead, hc.ahead_offset + world.settings.D_safe, world.settings.response)
+            # approached as a stop line is (settings.stop_decel), more gently than RSS's braking
+            comfort = replace(world.settings.response, brake_min=min(world.settings.response.brake_min,
+                                                                     settings.stop_decel))
+            follow = Follow(hc.s_ahead, hc.v_ahead, hc.ahead_offset + world.settings.D_safe, comfort)
     if math.isfinite(s_end) or follow is not None:
         s_ref, v_ref = _reference_to(route, s0, max(float(x0[3]), 0.0), steps, s_end, settings.stop_decel,
                                      follow=follow)
