@@ -82,13 +82,16 @@ def _log(w, T: int) -> TrafficLog:
 def test_the_terminal_rss_distance_holds_on_every_plan_by_the_monitor(tmp_path) -> None:
     w, xs, res, gap = _approach(tmp_path)
     rule = rules(tmp_path, RSS_RULE, name="rss").formula("rss")
+    w_params = BicycleParams()
     sensed = np.hypot(STALLED_AT - xs[:-1, 0], xs[:-1, 1]) <= w.settings.sensor_range
     for r, seen in zip(res, sensed):
         la = r.look_ahead
         assert la is not None and np.allclose(np.diff(la.times), [0.1] * 10 + [0.5] * 8)
-        # the plan's own states at its sample times, the stalled car where it stands
+        # the planned trajectory: the plan's controls on the bicycle (exactly; the plan's own
+        # states are its linearised model's), at its sample times; the stalled car where it stands
         T = len(la.times)
-        plan = {"x": la.states[:, 0], "y": la.states[:, 1], "psi": la.states[:, 2], "v": la.states[:, 3]}
+        xs_plan = bicycle.rollout(la.states[0], la.controls, la.dt * la.periods, w_params)
+        plan = {"x": xs_plan[:, 0], "y": xs_plan[:, 1], "psi": xs_plan[:, 2], "v": xs_plan[:, 3]}
         sig = signals_along(w, _log(w, T), plan)
         rho = robustness(rule, sig, 0.1)  # no temporal operator: the sample times do not matter
         if seen:  # RSS's distance plus D_safe at the plan's end (the chords lie above RSS's distance;

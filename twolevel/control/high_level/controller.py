@@ -39,6 +39,7 @@ from twolevel.compiler.types import Requirement
 from twolevel.control.codes import MIL515
 from twolevel.control.high_level.backend import Backend, BackendCache
 from twolevel.control.high_level.fallback import fallback_plan
+from twolevel.control.high_level.guards import BESIDE_FROM, Pass
 from twolevel.control.high_level.linearisation import StepData, history_length, prepare_step
 from twolevel.control.high_level.problem import Assembled, StepRules, assemble
 from twolevel.control.high_level.robustness import plan_robustness
@@ -71,6 +72,10 @@ class Carry:
     """[m] Where on the route the ego is expected at the next step (narrows its projection)."""
     recover_at: Mapping[str, float] = field(default_factory=dict)
     """Rule being recovered → time [s] from which the last plan met it again."""
+    passing: Pass | None = None
+    """While the plans pass the vehicle ahead: when they are due beside it and on which side (set
+    by the first plan that chose to pass, :data:`~twolevel.control.high_level.guards.BESIDE_FROM`
+    later)."""
 
 
 class HighLevelController:
@@ -140,7 +145,7 @@ class HighLevelController:
             u_prev = np.array([hist["delta"][-1], hist["a"][-1]])
         step = prepare_step(self.world, EgoState.of(ego).pose, t, snap.traffic, self.settings, self.params,
                             prev=prev, u_prev=u_prev, memory=memory, s_hint=self.carry.s_hint, about=about,
-                            stop_rules=self.stop_rules)
+                            stop_rules=self.stop_rules, passing=self.carry.passing)
         names = set().union(*(r.reads for r in self.rules)) if self.rules else set()
         depth = max((r.depth for r in self.rules), default=0)
         P = history_length(hist, names, depth)
@@ -332,7 +337,22 @@ class HighLevelController:
             else:
                 res = replace(res, timings_ms=tm, qps=res.qps + res2.qps)
         if res.ok:
-            self.carry = replace(self.carry, previous=PreviousPlan.of(t, res), s_hint=float(step.s_bar[1]))
+            self.carry = replace(self.carry, previous=PreviousPlan.of(t, res), s_hint=float(step.s_bar[1]),
+                                 passing=self._passing(step, res, t))
         elif res.status is PlanStatus.FALLBACK:
-            self.carry = replace(self.carry, previous=PreviousPlan.of(t, res))
+            self.carry = replace(self.carry, previous=PreviousPlan.of(t, res), passing=None)
         return res
+
+    def _passing(self, step: StepData, res: PlanResult, t: float) -> Pass | None:
+        """The pass of the vehicle ahead under way after a plan made at ``t`` [s]: kept while the
+        plans pass the same vehicle (the RSS terminal's disjunction, the model's first, chose a
+        side), begun by the first that did, in the next lane on that side."""
+        rss = step.rss
+        if rss is None or not rss.active or not any(rss.sides) or not len(res.mode) or res.mode[0] == 0:
+            return None
+        p = self.carry.passing
+        if p is not None and p.vehicle == rss.front:
+            return p
+        side = int(res.mode[0])
+        e_front = (rss.left[-1] + rss.right[-1]) / 2  # the passed vehicle's lateral offset
+        return Pass(t + BESIDE_FROM, side, rss.front, e_front + (step.lane_width if side == 1 else -step.lane_width))

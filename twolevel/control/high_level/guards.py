@@ -25,9 +25,9 @@ and the NMPC baseline of :mod:`twolevel.control.nmpc`):
   lane within the sensing range is at least RSS's safe distance
   (:func:`twolevel.world.assumptions.safe_distance`, the ego as the rear car: its response
   time and braking, the assumed maximum braking of the vehicle ahead) plus a margin — *or* the
-  ego is beside it, in a lane of the drivable band where it keeps RSS's distance to the
-  vehicles sensed in that lane (:func:`free_sides`; RSS's lateral safety: passing stays
-  possible). The gap is s_ahead,N − s_0 − (distance travelled) − (L_ego + L_ahead)/2, as for the
+  ego is beside it from :data:`BESIDE_FROM` on, in a lane of the drivable band where it keeps
+  RSS's distance to the vehicles sensed in that lane (:func:`free_sides`; RSS's lateral safety:
+  passing stays possible, and cannot be put off). The gap is s_ahead,N − s_0 − (distance travelled) − (L_ego + L_ahead)/2, as for the
   terminal stop (sideways motion does not shorten the distance travelled). RSS's distance is
   convex in v_N, so it lies below each of its chords over the interval the chord spans: K rows,
   one per chord over [v_lo, v̄ − w], [v̄ − w, v̄ + w], [v̄ + w, v_hi] (v̄ the linearisation's
@@ -54,13 +54,21 @@ from twolevel.world.signals import HorizonConstants
 from twolevel.world.world import World
 
 __all__ = ["stop_lines", "can_stop_slope", "TerminalStop", "terminal_stop", "drivable_band", "RssTerminal",
-           "rss_terminal", "free_sides", "chord", "CHORD_HALF_WIDTH", "LATERAL_MARGIN"]
+           "rss_terminal", "free_sides", "beside_steps", "BESIDE_FROM", "Pass", "Front", "front_of", "chord", "CHORD_HALF_WIDTH", "LATERAL_MARGIN"]
 
 CHORD_HALF_WIDTH = 0.5
 """[m/s] w: half the width of the chord of RSS's distance around the linearisation's speed."""
 
 LATERAL_MARGIN = 0.5
 """[m] Beside the vehicle ahead means the centres at least half the two widths and this apart."""
+
+BESIDE_FROM = 2.0
+"""[s] A plan that passes the vehicle ahead is beside it (in the next lane) from this long after
+the first plan that chose to pass, and keeps to that time and side while it passes (the
+controller carries them, :class:`Pass`): a pass cannot be
+put off from step to step (a "beside" that each plan may reach later can always be reached by a
+swerve in its coarse part, and the car drives on at the vehicle ahead). 2 s leave room for a
+lane change at the bicycle's lateral acceleration limit."""
 
 
 def stop_lines(hc: HorizonConstants, *, stop: bool, light: bool) -> np.ndarray:
@@ -160,69 +168,143 @@ def chord(f: "Callable[[np.ndarray], np.ndarray]", a: np.ndarray, b: np.ndarray)
     return slope, fa - slope * a
 
 
+@dataclass(frozen=True)
+class Front:
+    """The vehicle the RSS terminal is about: participant ``index``, predicted route positions
+    ``s`` (N+1,) [m] over the look-ahead, speed ``v`` [m/s] along the route, lateral offset ``e``
+    [m], ``offset`` [m] = (L_ego + L)/2 and ``width`` [m]."""
+
+    index: int
+    s: np.ndarray
+    v: float
+    e: float
+    offset: float
+    width: float
+
+
+@dataclass(frozen=True)
+class Pass:
+    """A pass of a vehicle ahead under way: of participant ``vehicle``, due beside it at time
+    ``by`` [s], on ``side`` (1: left, 2: right, the RSS terminal disjunct the first plan of the
+    pass chose), in the lane at lateral offset ``lane`` [m] (the reference's while it passes)."""
+
+    by: float
+    side: int
+    vehicle: int
+    lane: float
+
+
+def front_of(world: World, hc: HorizonConstants, passing: Pass | None, s0: float, dt: float,
+             ticks: np.ndarray) -> Front | None:
+    """The vehicle ahead for the RSS terminal from route position ``s0`` [m] over the look-ahead
+    at times dt·``ticks`` [s]: the one a pass under way is passing while it is sensed and its
+    rear is not yet D_safe behind the ego's front, else the vehicle ahead in the ego's lane
+    (``hc.ahead``), else None."""
+    if passing is not None:
+        j = np.flatnonzero(hc.seen == passing.vehicle)
+        if len(j):
+            j = int(j[0])
+            offset = (world.ego.length + float(world.parts.length[passing.vehicle])) / 2
+            if hc.seen_s[j] + offset + world.settings.D_safe > s0:
+                return Front(passing.vehicle, hc.seen_s[j] + hc.seen_v[j] * dt * ticks, float(hc.seen_v[j]),
+                             float(hc.seen_e[j]), offset, float(world.parts.width[passing.vehicle]))
+    if hc.ahead < 0:
+        return None
+    return Front(hc.ahead, hc.s_ahead, hc.v_ahead, hc.e_ahead, hc.ahead_offset, float(world.parts.width[hc.ahead]))
+
+
+def beside_steps(times: np.ndarray, by: float | None = None) -> np.ndarray:
+    """The steps k (1..N) at whose times ``times`` (N+1,) [s] from now being beside the vehicle
+    ahead is required of a plan that passes it: from ``by`` [s] on (the time a pass already
+    planned is due; None: a new pass, due in :data:`BESIDE_FROM`), and at least the last step."""
+    t = np.asarray(times)[1:]
+    due = BESIDE_FROM if by is None else by
+    return np.flatnonzero(t >= min(due, float(t[-1])) - 1e-9) + 1
+
+
+def free_sides(world: World, hc: HorizonConstants, front: Front, *, lateral: float, band: tuple[float, float],
+               s: np.ndarray, v: np.ndarray, t: np.ndarray) -> tuple[bool, bool]:
+    """Whether the ego may pass the vehicle ``front`` on the left and on the right: that offset
+    ``lateral`` [m] from its lies in the drivable ``band`` (lo, hi) [m], and at the times ``t``
+    (J,) [s] it would be beside it (:func:`beside_steps`), where the ego would then be (route
+    positions ``s`` (J,) [m], speeds ``v`` (J,) [m/s]), it keeps RSS's distance to every other
+    vehicle sensed in that lane, predicted at constant speed — behind one ahead of it (the ego's
+    response, ``world.settings.response``) and ahead of one behind it (the others' response,
+    ``world.assumptions.response``: whoever changes lanes leaves the follower its distance).
+    Vehicles beyond the sensing range are unknown: the check is as good as it."""
+    width = float(world.route.width_at(s[0]))
+    out = []
+    for side in (1.0, -1.0):
+        e_side = front.e + side * width
+        if not band[0] <= front.e + side * lateral <= band[1]:
+            out.append(False)
+            continue
+        there = (np.abs(hc.seen_e - e_side) < width / 2) & (hc.seen_v > 0) & (hc.seen != front.index)
+        v_j = hc.seen_v[there][:, None]
+        s_j = hc.seen_s[there][:, None] + v_j * t[None]  # (m, J)
+        gap = np.abs(s_j - s[None]) - (world.ego.length + world.parts.length[hc.seen[there]][:, None]) / 2
+        need = np.where(s_j >= s[None], safe_distance(v[None], v_j, world.settings.response),
+                        safe_distance(v_j, v[None], world.assumptions.response)) + world.settings.D_safe
+        out.append(bool(np.all(gap >= need)))
+    return out[0], out[1]
+
+
 @dataclass(frozen=True, eq=False)
 class RssTerminal:
     """*Can stop behind the vehicle ahead* at the end of the look-ahead (:func:`rss_terminal`), a
     disjunction of three: **behind** it — for each chord j of K,
     ``slope[j]``·v_N + (distance travelled from now to N) ≤ ``bound[j]`` [m] (v_0's share of the
-    distance moved into the bound) —, or **beside** it, the lateral offset e_N ≥ ``e_left`` or
-    ≤ ``e_right`` [m] (``sides``: whether the drivable band reaches there). ``active``: a vehicle
-    ahead is sensed (else every disjunct holds). ``rule`` (H, 2): the chord (slope [s],
-    intercept [m]) of RSS's distance over each fine step's reachable speeds, for the
-    ``rss_gap`` signal, and ``gap0`` [m]: ``rss_gap`` now."""
+    distance moved into the bound) —, or **passing** it, on the left the lateral offsets
+    e_k ≥ ``left[k−1]`` [m], on the right e_k ≤ ``right[k−1]`` [m] (NaN: free at step k; beside it
+    from :func:`beside_steps` on, and at the last fine step on the way there in proportion to the
+    time left, so that each plan starts the lane change it is committed to; ``sides``: whether
+    the ego may pass there, :func:`free_sides`). ``front``: the vehicle's participant index (−1:
+    none, and every disjunct holds). ``rule`` (H, 2): the chord (slope [s], intercept [m]) of
+    RSS's distance to the world's vehicle ahead over each fine step's reachable speeds, for the
+    ``rss_gap`` signal (NaN: none), and ``gap0`` [m]: ``rss_gap`` now."""
 
     slope: np.ndarray
     bound: np.ndarray
-    e_left: float
-    e_right: float
+    left: np.ndarray
+    right: np.ndarray
     sides: tuple[bool, bool]
-    active: bool
+    front: int
     rule: np.ndarray
     gap0: float = float("inf")
 
-
-def free_sides(world: World, hc: HorizonConstants, *, lateral: float, band: tuple[float, float], s_N: float,
-               v_N: float, T: float) -> tuple[bool, bool]:
-    """Whether the ego may be beside the vehicle ahead, left and right, at the end of the
-    look-ahead (``T`` [s] from now): that offset ``lateral`` [m] from the vehicle ahead's lies in
-    the drivable ``band`` (lo, hi) [m], and where the ego would then be (route position ``s_N``
-    [m], speed ``v_N`` [m/s]) it keeps RSS's distance to every vehicle sensed in that lane,
-    predicted at constant speed — behind one ahead of it (the ego's response,
-    ``world.settings.response``) and ahead of one behind it (the others' response,
-    ``world.assumptions.response``: whoever changes lanes leaves the follower its distance)."""
-    width = float(world.route.width_at(s_N))
-    out = []
-    for side in (1.0, -1.0):
-        e_side = hc.e_ahead + side * width
-        if not band[0] <= hc.e_ahead + side * lateral <= band[1]:
-            out.append(False)
-            continue
-        there = (np.abs(hc.seen_e - e_side) < width / 2) & (hc.seen_v > 0)
-        s_j = hc.seen_s[there] + hc.seen_v[there] * T
-        v_j = hc.seen_v[there]
-        gap = np.abs(s_j - s_N) - (world.ego.length + world.parts.length[hc.seen[there]]) / 2
-        need = np.where(s_j >= s_N, safe_distance(v_N, v_j, world.settings.response),
-                        safe_distance(v_j, v_N, world.assumptions.response)) + world.settings.D_safe
-        out.append(bool(np.all(gap >= need)))
-    return out[0], out[1]
+    @property
+    def active(self) -> bool:
+        return self.front >= 0
 
 
-def rss_terminal(hc: HorizonConstants, response: ResponseBounds, *, s0: float, v0: float, steps: np.ndarray, H: int,
-                 v_lo: np.ndarray, v_hi: np.ndarray, v_bar: np.ndarray, margin: float, a_min: float,
-                 lateral: float, sides: tuple[bool, bool], chords: int = 3) -> RssTerminal:
+def rss_terminal(hc: HorizonConstants, front: Front | None, response: ResponseBounds, *, s0: float, v0: float,
+                 steps: np.ndarray, H: int, v_lo: np.ndarray, v_hi: np.ndarray, v_bar: np.ndarray, margin: float,
+                 a_min: float, lateral: float, sides: tuple[bool, bool], beside: np.ndarray, e0: float, due: float,
+                 chords: int = 3) -> RssTerminal:
     """The terminal disjunction of the module docstring's *can stop behind the vehicle ahead*
-    for a look-ahead of ``steps`` (N,) [s] from the ego at route position ``s0`` [m] and speed
-    ``v0`` [m/s]: ``v_lo``/``v_hi`` (N,) [m/s] bound the speeds each step k = 1..N can reach,
-    ``v_bar`` (N,) [m/s] are the linearisation's, ``margin`` [m] is kept beyond RSS's distance,
-    ``a_min`` [m/s²] is full braking (< 0), ``lateral`` [m] the offset from the vehicle ahead's
-    that counts as beside it and ``sides`` (left, right) whether being beside is allowed
-    (:func:`free_sides`)."""
+    (``front``, :func:`front_of`) for a look-ahead of ``steps`` (N,) [s] from the ego at route
+    position ``s0`` [m] and speed ``v0`` [m/s]: ``v_lo``/``v_hi`` (N,) [m/s] bound the speeds
+    each step k = 1..N can reach, ``v_bar`` (N,) [m/s] are the linearisation's, ``margin`` [m] is
+    kept beyond RSS's distance, ``a_min`` [m/s²] is full braking (< 0), ``lateral`` [m] the
+    offset from the front's that counts as beside it, ``sides`` (left, right) whether being
+    beside is allowed (:func:`free_sides`), ``beside`` the steps at which it is required
+    (:func:`beside_steps`), ``e0`` [m] the ego's lateral offset now and ``due`` [s] the time
+    from now it is due there. The ``rss_gap`` signal's chords are of the world's vehicle ahead
+    (``hc``)."""
     N = len(steps)
-    if hc.ahead < 0:
-        return RssTerminal(np.zeros(chords), np.ones(chords), 0.0, 0.0, (True, True), False, np.full((H, 2), np.nan))
+    rule, gap0 = np.full((H, 2), np.nan), float("inf")
+    if hc.ahead >= 0:  # the signal's vehicle: the world's (rss_gap)
+        def g(v: np.ndarray) -> np.ndarray:
+            return safe_distance(v, hc.v_ahead, response)
+
+        rule = np.stack(chord(g, v_lo[:H], np.maximum(v_hi[:H], v_lo[:H])), axis=1)
+        gap0 = float(hc.s_ahead[0] - hc.ahead_offset - s0 - g(np.asarray(v0)))
+    if front is None:
+        free = np.full(N, np.nan)
+        return RssTerminal(np.zeros(chords), np.ones(chords), free, free, (True, True), -1, rule, gap0)
 
     def f(v: np.ndarray) -> np.ndarray:
-        return safe_distance(v, hc.v_ahead, response)
+        return safe_distance(v, front.v, response)
 
     lo, hi = float(v_lo[-1]), max(float(v_hi[-1]), float(v_lo[-1]))
     vb = min(max(float(v_bar[-1]), lo), hi)
@@ -231,7 +313,7 @@ def rss_terminal(hc: HorizonConstants, response: ResponseBounds, *, s0: float, v
         np.linspace(lo, hi, chords + 1)
     slope, icpt = chord(f, cuts[:-1], cuts[1:])
     share = 0.5 * steps[0] * v0  # v_0's share of the distance travelled
-    bound = hc.s_ahead[N] - hc.ahead_offset - margin - s0 - share - icpt
+    bound = front.s[N] - front.offset - margin - s0 - share - icpt
     # full braking from now: the least distance and speed the last step can have
     vbrk = np.empty(N + 1)
     vbrk[0] = v0
@@ -240,7 +322,11 @@ def rss_terminal(hc: HorizonConstants, response: ResponseBounds, *, s0: float, v
     travelled = float(np.sum(0.5 * steps * (vbrk[:-1] + vbrk[1:]))) - share
     miss = slope * vbrk[N] + travelled - bound  # > 0: even full braking misses the row
     bound = bound + np.maximum(miss, 0.0) + np.where(miss > -1e-6, 1e-6, 0.0)
-    e_left, e_right = hc.e_ahead + lateral, hc.e_ahead - lateral
-    rule = np.stack(chord(f, v_lo[:H], np.maximum(v_hi[:H], v_lo[:H])), axis=1)
-    gap0 = float(hc.s_ahead[0] - hc.ahead_offset - s0 - f(np.asarray(v0)))
-    return RssTerminal(slope, bound, e_left, e_right, sides, True, rule, gap0)
+    side = []
+    for e_side in (front.e + lateral, front.e - lateral):
+        at = np.full(N, np.nan)
+        at[beside - 1] = e_side
+        if H not in beside:  # on the way there by the end of the fine part, as far as the time allows
+            at[H - 1] = e0 + (e_side - e0) * min(1.0, H * steps[0] / max(due, 1e-9))
+        side.append(at)
+    return RssTerminal(slope, bound, side[0], side[1], sides, front.index, rule, gap0)

@@ -20,8 +20,8 @@ from typing import Mapping
 
 import numpy as np
 
-from twolevel.control.high_level.guards import (RssTerminal, TerminalStop, drivable_band, rss_terminal, stop_lines,
-                                                terminal_stop)
+from twolevel.control.high_level.guards import (Pass, RssTerminal, TerminalStop, drivable_band, rss_terminal,
+                                                stop_lines, terminal_stop)
 from twolevel.control.high_level.reference import reference, reference_controls, wrap_to
 from twolevel.control.high_level.settings import MPCSettings
 from twolevel.control.planner import PreviousPlan
@@ -166,6 +166,7 @@ def prepare_step(
     world: World, x0: np.ndarray, t: float, traffic: TrafficState, settings: MPCSettings, params: BicycleParams,
     *, prev: PreviousPlan | None = None, u_prev: np.ndarray | None = None, memory: StopMemory | None = None,
     s_hint: float | None = None, about: str = "plan", stop_rules: tuple[bool, bool] = (False, False),
+    passing: Pass | None = None,
 ) -> StepData:
     """Everything known at time ``t`` [s] for ego state ``x0`` = (X, Y, ψ, v), over the
     look-ahead of ``settings``.
@@ -177,7 +178,8 @@ def prepare_step(
     plan's first). ``stop_rules`` = (a rule reads d_stop, a rule reads light_red/d_light): which
     lines the terminal can-still-stop condition guards, with ``settings.stop_decel`` [m/s²] and
     ``settings.stop_margin`` [m] before the line; ``settings.band``: bound the lateral offset to
-    the drivable band; ``settings.rss``: keep RSS's distance behind the vehicle ahead. The speed
+    the drivable band; ``settings.rss``: keep RSS's distance behind the vehicle ahead, or pass it
+    (``passing``: a pass under way, :class:`~twolevel.control.high_level.guards.Pass`). The speed
     is bounded by what the ego can see (:func:`sensing_bound`, the world's
     ``settings.v_sense``). ``memory``, ``s_hint``: see
     :func:`~twolevel.control.high_level.reference.reference`."""
@@ -189,7 +191,8 @@ def prepare_step(
     route = world.route
     ws = world.settings
     x0 = np.asarray(x0, dtype=float)[:4].copy()
-    ref = reference(world, x0, t, traffic, settings, params, memory=memory, s_hint=s_hint, stop_rules=stop_rules)
+    ref = reference(world, x0, t, traffic, settings, params, memory=memory, s_hint=s_hint, stop_rules=stop_rules,
+                    passing=passing)
     s0, s_ref, v_ref, omega, hc = ref.s0, ref.s_ref, ref.v_ref, ref.omega, ref.hc
     if about == "brake":  # a braking rollout with the wheel straight (to standstill, no reversing)
         us_bar = np.zeros((N, 2))
@@ -242,9 +245,9 @@ def prepare_step(
     rss = None
     if settings.rss:
         v_lo = np.maximum(float(x0[3]) + params.a_min * dt * ticks[1:], 0.0)
-        rss = rss_terminal(hc, ws.response, s0=s0, v0=float(x0[3]), steps=steps, H=H, v_lo=v_lo, v_hi=hi[:, 3],
+        rss = rss_terminal(hc, ref.front, ws.response, s0=s0, v0=float(x0[3]), steps=steps, H=H, v_lo=v_lo, v_hi=hi[:, 3],
                            v_bar=xs_bar[1:, 3], margin=ws.D_safe, a_min=params.a_min, lateral=ref.lateral,
-                           sides=ref.sides)
+                           sides=ref.sides, beside=ref.beside, e0=ref.e0, due=ref.due)
     return StepData(t, x0, np.asarray(u_prev, float), xs_bar, us_bar, A, B, c, omega, s_ref, s_bar, h_bar, p_bar,
                     lo, hi, hc, width, e_lo, e_hi, term, steering_bound(np.maximum(xs_bar[:-1, 3], x0[3]),
                                                                         route.curvature_at(s_ref[:-1]), params),

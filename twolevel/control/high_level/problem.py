@@ -15,7 +15,9 @@ always hold when no vehicle is ahead); then the rules' rows (``stl``, and ``cf*`
 over the fine part only.
 
 Cost (paper): Σ_k w_u‖u_k‖² + w_du‖u_k − u_{k−1}‖² + Σ_i w_i (ζ_{k,i} − ω_{k,i})², as residuals,
-over every step of the look-ahead.
+over every step of the look-ahead, each step's terms weighed by its length in periods (a coarse
+step of 0.5 s counts as five of the paper's: the sum stays a time integral, and a plan gains
+nothing by putting a manoeuvre off into the coarse part).
 
 Signals of the trace (past samples from ``history``, then now, then k = 1..H: the rules see the
 fine part, in steps of dt): constants for what is known at solve time,
@@ -174,7 +176,7 @@ def trace_signals(step: StepData, lay: Layout, n: int, past: Mapping[str, np.nda
                 out[name] = _affine(xy, -t_hat, tgt[1:] - extra - s_off, hist(name, now), n)
         elif name == "rss_gap":
             rss = step.rss
-            if rss is None or not rss.active:
+            if rss is None or not np.all(np.isfinite(rss.rule)):  # no vehicle ahead in the ego's lane
                 out[name] = np.concatenate([hist(name, np.inf)[:-1], np.full(H + 1, np.inf)])
             else:  # s_ahead,k − s_k − offset − (c0 + c1·v_k): three coefficients per sample
                 cols = np.concatenate([xy, lay.x[:, 3:4]], axis=1)
@@ -233,12 +235,6 @@ def _travelled(steps: np.ndarray) -> np.ndarray:
     return 0.5 * (steps + np.concatenate([steps[1:], [0.0]]))
 
 
-def _box_range(n_hat: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[float, float]:
-    """Min and max of n̂ᵀp [m] over the box lo ≤ p ≤ hi (2,)."""
-    a, b = n_hat * lo, n_hat * hi
-    return float(np.minimum(a, b).sum()), float(np.maximum(a, b).sum())
-
-
 def rss_bounds(step: StepData) -> np.ndarray:
     """Upper bounds (3,) of the RSS terminal disjunction's binaries (behind, left, right): a side
     the ego may not be beside the vehicle ahead on is switched off (every disjunct holds when
@@ -292,18 +288,22 @@ def guard_values(step: StepData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             vals.append(np.zeros(K * N))
             lo.append(np.full(K, -1.0))
         if mode == "choice":  # each disjunct's rows relaxed by its M when its binary is 0
-            n_N, b_N = n_hat[-1], float(base[-1])
             v_hi = step.hi[:, 3]
             m_b = np.maximum(0.0, rss.slope * v_hi[-1] + trav @ v_hi - rss.bound) + 1.0
-            e_min, e_max = _box_range(n_N, step.lo[-1, :2], step.hi[-1, :2])
-            m_l = max(0.0, rss.e_left + b_N - e_min) + 1.0
-            m_r = max(0.0, e_max - rss.e_right - b_N) + 1.0
-            vals += [np.column_stack([coef, -m_b]).ravel(), n_N, [-m_l], -n_N, [-m_r], np.ones(3)]
-            lo += [-rss.bound - m_b, [rss.e_left + b_N - m_l], [-(rss.e_right + b_N) - m_r], [1.0]]
+            a, c = n_hat * step.lo[:, :2], n_hat * step.hi[:, :2]
+            e_min, e_max = np.minimum(a, c).sum(axis=1), np.maximum(a, c).sum(axis=1)  # n̂ᵀp over the box
+            left, right = np.nan_to_num(rss.left), np.nan_to_num(rss.right)  # NaN: free (0 ≥ −1)
+            m_l = np.maximum(0.0, left + base - e_min) + 1.0
+            m_r = np.maximum(0.0, e_max - right - base) + 1.0
+            side = [np.where(np.isfinite(at)[:, None], np.column_stack([sign * n_hat, -m]), 0.0).ravel()
+                    for at, sign, m in ((rss.left, 1.0, m_l), (rss.right, -1.0, m_r))]
+            vals += [np.column_stack([coef, -m_b]).ravel(), *side, np.ones(3)]
+            lo += [-rss.bound - m_b, np.where(np.isfinite(rss.left), left + base - m_l, -1.0),
+                   np.where(np.isfinite(rss.right), -(right + base) - m_r, -1.0), [1.0]]
         else:  # every disjunct holds
-            vals += [np.zeros(K * (N + 1) + 6), np.ones(3)]
-            lo += [np.full(K + 2, -1.0), [1.0]]
-        hi += [np.full(2 * K + 3, np.inf)]
+            vals += [np.zeros(K * (N + 1) + 6 * N), np.ones(3)]
+            lo += [np.full(K + 2 * N, -1.0), [1.0]]
+        hi += [np.full(2 * K + 2 * N + 1, np.inf)]
     return np.concatenate(vals), np.concatenate(lo), np.concatenate(hi)
 
 
@@ -316,16 +316,20 @@ def _guards(b: ModelBuilder, step: StepData, lay: Layout) -> None:
     if rss is not None:
         K = len(rss.slope)
         r0 = N + 1 + K  # the disjunction's first row, after the plain behind rows
-        rows += [np.repeat(N + 1 + np.arange(K), N), np.repeat(r0 + np.arange(K), N + 1), np.full(3, r0 + K),
-                 np.full(3, r0 + K + 1), np.full(3, r0 + K + 2)]
-        cols += [np.tile(lay.x[:, 3], K), np.tile(np.append(lay.x[:, 3], lay.rss[0]), K),
-                 np.append(lay.x[-1, :2], lay.rss[1]), np.append(lay.x[-1, :2], lay.rss[2]), lay.rss]
-        n_rows += 2 * K + 3
+        rl, rr, rc = r0 + K, r0 + K + N, r0 + K + 2 * N  # its left rows, right rows (one per step), cover row
+        side_cols = np.column_stack([lay.x[:, :2], np.zeros(N, np.int64)])
+        left, right = side_cols.copy(), side_cols
+        left[:, 2], right[:, 2] = lay.rss[1], lay.rss[2]
+        rows += [np.repeat(N + 1 + np.arange(K), N), np.repeat(r0 + np.arange(K), N + 1),
+                 np.repeat(rl + np.arange(N), 3), np.repeat(rr + np.arange(N), 3), np.full(3, rc)]
+        cols += [np.tile(lay.x[:, 3], K), np.tile(np.append(lay.x[:, 3], lay.rss[0]), K), left.ravel(), right.ravel(),
+                 lay.rss]
+        n_rows += 2 * K + 2 * N + 1
     vals, lo, hi = guard_values(step)
     g = b.add_rows("guard", n_rows, np.concatenate(rows), np.concatenate(cols), vals, lo, hi)
     if rss is not None:
-        b.add_disjunction(Disjunction(len(b.disjunctions), lay.rss.copy(), (g[r0:r0 + K], g[[r0 + K]], g[[r0 + K + 1]]),
-                                      int(g[r0 + K + 2]), label="rss terminal: behind | left | right"))
+        b.add_disjunction(Disjunction(len(b.disjunctions), lay.rss.copy(), (g[r0:rl], g[rl:rr], g[rr:rc]), int(g[rc]),
+                                      label="rss terminal: behind | left | right"))
 
 
 @dataclass(frozen=True, eq=False)
@@ -352,19 +356,20 @@ def _widen(cs: _CostShape, n: int) -> _CostShape:
     return _CostShape(F, cs.w, P, FtW)
 
 
-def _cost_shape(lay: Layout, w: Weights, n: int) -> _CostShape:
+def _cost_shape(lay: Layout, w: Weights, n: int, span: tuple[float, ...]) -> _CostShape:
     """The cost's matrices over ``n`` columns; built once over the state and input columns (which
-    come first) and widened per column count, so a new number of binaries costs no rebuild."""
+    come first) and widened per column count, so a new number of binaries costs no rebuild.
+    ``span`` (N,): each step's length in periods, which weighs its terms."""
     H = lay.x.shape[0]
-    key = (H, w, n, int(lay.x[0, 0]), int(lay.u[0, 0]))
+    key = (H, w, n, int(lay.x[0, 0]), int(lay.u[0, 0]), span)
     hit = _COST_CACHE.get(key)
     if hit is not None:
         return hit
     n0 = int(max(lay.x.max(), lay.u.max())) + 1
-    base_key = (H, w, n0, int(lay.x[0, 0]), int(lay.u[0, 0]))
+    base_key = (H, w, n0, int(lay.x[0, 0]), int(lay.u[0, 0]), span)
     base = _COST_CACHE.get(base_key)
     if base is None:
-        base = _base_cost_shape(lay, w, n0)
+        base = _base_cost_shape(lay, w, n0, np.asarray(span))
         _COST_CACHE[base_key] = base
     out = base if n == n0 else _widen(base, n)
     if len(_COST_CACHE) > 64:
@@ -374,7 +379,7 @@ def _cost_shape(lay: Layout, w: Weights, n: int) -> _CostShape:
     return out
 
 
-def _base_cost_shape(lay: Layout, w: Weights, n: int) -> _CostShape:
+def _base_cost_shape(lay: Layout, w: Weights, n: int, span: np.ndarray) -> _CostShape:
     H = lay.x.shape[0]
     nu = 2 * H
     ucols = lay.u.ravel()
@@ -388,6 +393,7 @@ def _base_cost_shape(lay: Layout, w: Weights, n: int) -> _CostShape:
     F_x = sp.csr_matrix((np.ones(nx), (np.arange(nx), lay.x.ravel())), shape=(nx, n))
     F = sp.vstack([F_u, F_du, F_x]).tocsr()
     wt = np.concatenate([np.full(nu, w.u), np.full(nu, w.du), np.tile(np.asarray(w.track, float), H)])
+    wt *= np.concatenate([np.repeat(span, 2), np.repeat(span, 2), np.repeat(span, 4)])  # a coarse step lasts longer
     Hs = (F.T @ sp.diags(2.0 * wt) @ F).tocsc()
     P = sp.triu(Hs).tocsc()
     P.sum_duplicates()
@@ -407,7 +413,7 @@ def others_of(step: StepData, P: int) -> np.ndarray:
 def _cost(model: MilpModel, step: StepData, lay: Layout, w: Weights) -> None:
     """Put the paper's cost into ``model`` (P shared between models of the same shape)."""
     H = lay.x.shape[0]
-    cs = _cost_shape(lay, w, model.n_cols)
+    cs = _cost_shape(lay, w, model.n_cols, tuple(step.steps / step.steps[0]))
     nu = 2 * H
     g = np.zeros(2 * nu + 4 * H)
     g[nu:nu + 2] = step.u_prev

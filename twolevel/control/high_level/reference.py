@@ -11,12 +11,13 @@ stop before. Units: m, rad, m/s, s.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Sequence
 
 import numpy as np
 
-from twolevel.control.high_level.guards import LATERAL_MARGIN, drivable_band, free_sides, stop_lines
+from twolevel.control.high_level.guards import (BESIDE_FROM, LATERAL_MARGIN, Front, Pass, beside_steps,
+                                                drivable_band, free_sides, front_of, stop_lines)
 from twolevel.control.high_level.settings import MPCSettings
 from twolevel.models.params import BicycleParams
 from twolevel.world.assumptions import ResponseBounds, safe_speed
@@ -34,8 +35,10 @@ class Reference:
     route positions ``s_ref`` (N+1,) [m] and speeds ``v_ref`` (N+1,) [m/s], the waypoints
     ``omega`` (N, 4) = (X, Y, ψ, v) for k = 1..N (the whole look-ahead), the solve-time constants
     ``hc`` along them, where full braking from now ends the look-ahead: ``d_brake`` [m]
-    further, at ``v_brake`` [m/s], and whether the ego may end it beside the vehicle ahead,
-    ``sides`` (left, right), at ``lateral`` [m] from it
+    further, at ``v_brake`` [m/s], the vehicle ahead of the RSS terminal ``front``
+    (:func:`twolevel.control.high_level.guards.front_of`) and whether the ego may pass it,
+    ``sides`` (left, right), beside it at ``lateral`` [m] from it at the steps ``beside``,
+    ``due`` [s] from now
     (:func:`twolevel.control.high_level.guards.free_sides`)."""
 
     s0: float
@@ -46,8 +49,11 @@ class Reference:
     hc: HorizonConstants
     d_brake: float
     v_brake: float
+    front: Front | None = None
     sides: tuple[bool, bool] = (False, False)
     lateral: float = 0.0
+    beside: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    due: float = 0.0
 
 
 def wrap_to(angle: np.ndarray | float, ref: float) -> np.ndarray:
@@ -114,14 +120,16 @@ def _reference_to(route: Route, s0: float, v0: float, steps: Sequence[float], s_
 
 def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, settings: MPCSettings,
               params: BicycleParams, *, memory: StopMemory | None = None, s_hint: float | None = None,
-              stop_rules: tuple[bool, bool] = (False, False)) -> Reference:
+              stop_rules: tuple[bool, bool] = (False, False), passing: Pass | None = None) -> Reference:
     """The reference at time ``t`` [s] for ego state ``x0`` = (X, Y, ψ, v) over the look-ahead of
     ``settings``: the ego is projected near ``s_hint`` [m] when given (else onto the whole
     route); ``stop_rules`` = (a rule reads d_stop, a rule reads light_red/d_light) says which
     lines the reference stops before (at ``settings.stop_decel``, ``settings.stop_margin``
-    before the line). With ``settings.rss``, when the ego may not end the look-ahead beside the
-    vehicle ahead sensed in its lane (:func:`~twolevel.control.high_level.guards.free_sides`,
-    judged where the desired speeds would take it), the reference keeps RSS's distance (and
+    before the line). With ``settings.rss``, when the ego may not pass the vehicle ahead sensed
+    in its lane (:func:`~twolevel.control.high_level.guards.free_sides`, judged where the desired
+    speeds would take it, beside it from :data:`~twolevel.control.high_level.guards.BESIDE_FROM`
+    on, or, ``passing`` it already, from the pass's due time on its side; while it passes, the
+    reference runs in the lane it passes in), the reference keeps RSS's distance (and
     D_safe) behind that vehicle — braking for it at ``settings.stop_decel`` at most, so it
     slows down before RSS's braking would be needed —, as the plan must at the end of the look-ahead
     (:func:`~twolevel.control.high_level.guards.rss_terminal`): a reference that runs into it
@@ -147,24 +155,35 @@ def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, set
         s_near = float(min(lines[0], lines[-1]))
         if s0 + d_brake <= s_near + 1e-6:
             s_end = min(s_end, max(s_near - settings.stop_margin, s0))
-    follow, sides, lateral = None, (False, False), 0.0
-    if settings.rss and hc.ahead >= 0:
-        lateral = 0.5 * (world.ego.width + float(world.parts.width[hc.ahead])) + LATERAL_MARGIN
-        lo, hi = drivable_band(world, s_ref[-1:])
-        sides = free_sides(world, hc, lateral=lateral, band=(float(lo[0]), float(hi[0])), s_N=float(s_ref[-1]),
-                           v_N=float(v_ref[-1]), T=settings.look_ahead)
+    follow, sides, lateral, lane = None, (False, False), 0.0, 0.0
+    ticks = np.asarray(settings.ticks)
+    times = dt * ticks
+    front = front_of(world, hc, passing, s0, dt, ticks) if settings.rss else None
+    if front is None or passing is None or front.index != passing.vehicle:
+        passing = None  # no pass under way (any more)
+    due = BESIDE_FROM if passing is None else passing.by - t
+    beside = beside_steps(times, due)
+    if front is not None:
+        lateral = 0.5 * (world.ego.width + front.width) + LATERAL_MARGIN
+        lo, hi = drivable_band(world, s_ref[beside])
+        sides = free_sides(world, hc, front, lateral=lateral, band=(float(lo.max()), float(hi.min())),
+                           s=s_ref[beside], v=v_ref[beside], t=times[beside])
+        if passing is not None:  # the side the pass began on, the reference in that lane
+            sides = (sides[0] and passing.side == 1, sides[1] and passing.side == 2)
+            lane = passing.lane if any(sides) else 0.0
         if not any(sides):
             # approached as a stop line is (settings.stop_decel), more gently than RSS's braking
             comfort = replace(world.settings.response, brake_min=min(world.settings.response.brake_min,
                                                                      settings.stop_decel))
-            follow = Follow(hc.s_ahead, hc.v_ahead, hc.ahead_offset + world.settings.D_safe, comfort)
+            follow = Follow(front.s, front.v, front.offset + world.settings.D_safe, comfort)
     if math.isfinite(s_end) or follow is not None:
         s_ref, v_ref = _reference_to(route, s0, max(float(x0[3]), 0.0), steps, s_end, settings.stop_decel,
                                      follow=follow)
         hc = replace(hc, s_ref=s_ref, v_max=route.limit_at(s_ref).astype(float))
     v_ref = np.minimum(v_ref, route.limit_at(s_ref))
-    pts = route.position(s_ref)
+    pts = route.position(s_ref, lane)
     head = wrap_to(route.heading_at(s_ref), float(x0[2]))
     head = x0[2] + np.concatenate([[0.0], np.cumsum(wrap_to(np.diff(head), 0.0))])
     omega = np.column_stack([pts[1:], head[1:], v_ref[1:]])
-    return Reference(s0, float(e_arr[0]), s_ref, v_ref, omega, hc, d_brake, v_brake, sides, lateral)
+    return Reference(s0, float(e_arr[0]), s_ref, v_ref, omega, hc, d_brake, v_brake, front, sides, lateral, beside,
+                     due)
