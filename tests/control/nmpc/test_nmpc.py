@@ -240,3 +240,21 @@ def test_options_are_frozen() -> None:
     with pytest.raises(Exception):
         o.max_iter = 3  # type: ignore[misc]
     assert replace(o, warm_start="primal").warm_start == "primal"
+
+
+def test_plans_the_papers_horizon_within_the_sensing_speed_bound(tmp_path: Path) -> None:
+    # the MPC's settings look 5 s ahead; the baseline keeps H = 10 steps of dt, and the speed from
+    # which the ego stops within its sensing range (40 m here: ~16 m/s) bounds it as the MPC
+    (tmp_path / "scn.yaml").write_text(
+        f"kind: scenario\nname: sense\nmap: {REPO / 'maps' / 'highway.yaml'}\n"
+        "ego: {start: {lane: middle, s: 20}, speed: 12.0, desired_speed: 25.0}\n"
+        "route: {start: {lane: middle, s: 20}, goal: {lane: middle, s: 1400}, stop_at_goal: false}\n"
+        f"rules: [{RULES / 'speed_limit.stl'}]\ncontroller: {{sensor_range: 40}}\nrun: {{duration: 10, seed: 0}}\n")
+    scn, diags = load_scenario(tmp_path / "scn.yaml")
+    assert scn is not None, [d.message for d in diags]
+    w = build_world(scn)
+    ctrl = make(w)
+    assert ctrl.settings.N == ctrl.settings.H == 10 and not ctrl.settings.rss
+    xs, res = closed_loop(ctrl, w, 60)
+    assert all(r.ok for r in res) and res[0].controls.shape == (10, 2) and res[0].look_ahead is None
+    assert xs[:, 3].max() <= w.settings.v_sense + 1e-3 and xs[-1, 3] > w.settings.v_sense - 0.5

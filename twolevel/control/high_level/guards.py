@@ -1,7 +1,8 @@
 """Guards every MPC plan obeys besides the rules: where it may stop, and where it may drive.
 
 One definition, used by both planners (the MILP MPC of :mod:`twolevel.control.high_level`
-and the NMPC baseline of :mod:`twolevel.control.nmpc`):
+and the NMPC baseline of :mod:`twolevel.control.nmpc`; RSS's distance and passes by the MPC only,
+at the end of its look-ahead, :mod:`twolevel.control.high_level.settings`):
 
 * :func:`stop_lines` — the stop line the plan must keep behind at each step of the horizon: the
   stop sign's line while it applies (not yet served, within r_near; the world's definition in

@@ -9,10 +9,12 @@ lateral offset e_k ≈ n̄_kᵀ(p_k − p̄_k) within the drivable band for k = 
 can-still-stop row v_N ≤ κ·(s_line − margin − s_0 − Σ_k h_k·(v_k + v_{k+1})/2) + offset on the
 distance travelled (which no sideways motion shortens, and which bounds the route progress from
 above; ``0·x ≤ 1`` when no line applies, so the pattern never changes), and, when the settings
-keep RSS's distance, the terminal disjunction *behind the vehicle ahead by RSS's distance (K
-chord rows) or beside it (left, right)* with its cover row (binaries ``rss``; zero rows that
-always hold when no vehicle is ahead); then the rules' rows (``stl``, and ``cf*`` for the vectorised collision_free blocks),
-over the fine part only.
+keep RSS's distance, K plain rows *behind the vehicle ahead by RSS's distance* (in force when the
+ego may not pass it, so the mode search's lower bound keeps them), then the disjunction *behind
+(the same K rows) | passing on the left | on the right (a lateral-offset row per step)* with its
+cover row (binaries ``rss``; in force when a side is free; rows not in force are zero rows that
+always hold, so the pattern never changes); then the rules' rows (``stl``, and ``cf*`` for the
+vectorised collision_free blocks), over the fine part only.
 
 Cost (paper): Σ_k w_u‖u_k‖² + w_du‖u_k − u_{k−1}‖² + Σ_i w_i (ζ_{k,i} − ω_{k,i})², as residuals,
 over every step of the look-ahead, each step's terms weighed by its length in periods (a coarse
