@@ -101,7 +101,9 @@ def test_plan_json_is_strict_with_every_backend(scenario: str, backend: str) -> 
     assert res.returncode == 0, res.stderr
     doc = strict_json(res.stdout)
     assert doc["status"] in ("optimal", "feasible")  # type: ignore[index]
-    assert len(doc["plan"]) == 11 and all(len(row) == 7 for row in doc["plan"])  # type: ignore[index]
+    # the look-ahead: 10 steps of 0.1 s, then 8 of 0.5 s (the safety scenario: the paper's 1 s)
+    assert len(doc["plan"]) == (11 if scenario == "safety" else 19)  # type: ignore[index]
+    assert all(len(row) == 7 for row in doc["plan"])  # type: ignore[index]
     for rule in doc["rules"]:  # type: ignore[index]
         number(rule["robustness"])
 

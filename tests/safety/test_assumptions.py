@@ -27,7 +27,7 @@ def scenario(tmp: Path, section: str, extra: str = "") -> Path:
     text = f"""\
 kind: scenario
 map: {MAPS / 'highway.yaml'}
-ego: {{start: {{lane: middle, s: 10}}, speed: 10, desired_speed: 20}}
+ego: {{start: {{lane: middle, s: 10}}, speed: 10}}
 route: {{start: {{lane: middle, s: 10}}, goal: {{lane: middle, s: 500}}}}
 participants:
   - {{id: walker, behaviour: stationary, start: {{x: 50, y: 8, heading: 0}}}}

@@ -14,8 +14,10 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from twolevel.cli import app
-from twolevel.control.high_level.settings import DEFAULT_HORIZON_S, MAX_COARSE_STEPS, MPCSettings, look_ahead_periods
+from twolevel.control.high_level.settings import MPCSettings
+from twolevel.world.look_ahead import DEFAULT_HORIZON_S, MAX_COARSE_STEPS, look_ahead_periods
 from twolevel.world.assumptions import ResponseBounds, safe_distance, safe_speed, stopping_speed
+from twolevel.pipeline.checking import check
 from twolevel.world.loader import check_world_file, load_scenario
 from twolevel.world.sensing import Memory, others_now, others_predicted, sense
 from twolevel.world.signals import TrafficLog, signals_along
@@ -37,16 +39,21 @@ ego:
 route: {{start: {{lane: middle, s: 20}}, goal: {{lane: middle, s: 1400}}, stop_at_goal: false}}
 participants: {participants}
 controller:
-{controller}
+{controller}expect: {{goal: false}}
 """
     p = tmp / "s.yaml"
     p.write_text(text)
     return p
 
 
+def findings(p: Path) -> list:
+    """What ``twolevel check`` reports for a file (its loader's diagnostics and its lints)."""
+    return list(check([str(p)]).diagnostics)
+
+
 def test_a_sensing_range_too_short_for_the_speed_allowed_is_warned_at_its_line(tmp_path: Path) -> None:
     p = scenario(tmp_path, "  r_near: 20\n  sensor_range: 60\n")
-    diags = check_world_file(p)
+    diags = findings(p)
     assert [(d.code, d.span.line, d.span.column) for d in diags] == [("YML431", 11, 17)]
     msg = diags[0].message
     need = safe_distance(30.0, 0.0, ResponseBounds(0.1, 3.0, 4.0, 8.0)) + 4.22 + 1.0
@@ -63,16 +70,16 @@ def test_a_sensing_range_too_short_for_the_speed_allowed_is_warned_at_its_line(t
 def test_the_desired_speed_caps_the_speed_allowed(tmp_path: Path) -> None:
     # 14 m/s needs 26 m + one car length + D_safe: 60 m suffice, 30 m do not
     ok = scenario(tmp_path, "  r_near: 20\n  sensor_range: 60\n", desired="\n  desired_speed: 14")
-    assert check_world_file(ok) == []
+    assert findings(ok) == []
     short = scenario(tmp_path, "  r_near: 20\n  sensor_range: 30\n", desired="\n  desired_speed: 14")
-    d = check_world_file(short)
+    d = findings(short)
     assert [x.code for x in d] == ["YML431"] and "desired speed 14 m/s" in d[0].message and "at 14 m/s" in d[0].message
 
 
 def test_without_a_sensor_range_the_warning_points_at_the_controller_section(tmp_path: Path) -> None:
     # the default range (100 m) is too short for the highway's 30 m/s: the section is where to add it
     p = scenario(tmp_path, "  r_near: 20\n")
-    d = check_world_file(p)
+    d = findings(p)
     assert [(x.code, x.span.line) for x in d] == [("YML431", 9)] and "sensing range 100 m" in d[0].message
 
 

@@ -5,7 +5,10 @@
   there, one parameter at a time and, for a few parameters, at every corner of their box;
 * YML427: the goal is out of reach: at the highest speed the route allows (its speed limits,
   capped by the ego's desired speed) the route takes longer than the run or the goal's
-  deadline (``expect.goal.by``).
+  deadline (``expect.goal.by``);
+* YML431: the ego cannot stop within its sensing range from the highest speed the scenario
+  allows (the same speed): it will keep below the speed it can stop from
+  (:class:`~twolevel.world.loader.Sensing`), slower than the scenario asks.
 
 Imported by ``twolevel check``: pydantic, PyYAML and the standard library only.
 """
@@ -13,17 +16,18 @@ Imported by ``twolevel check``: pydantic, PyYAML and the standard library only.
 from __future__ import annotations
 
 import itertools
+import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from twolevel.diagnostics import Diagnostic
-from twolevel.world.codes import YML426, YML427
+from twolevel.world.codes import YML426, YML427, YML431
 from twolevel.world.schema import Parameter
 
 if TYPE_CHECKING:
     from twolevel.world.loader import Scenario
 
-__all__ = ["lint_scenario", "lint_world_file", "extremes", "MAX_CORNERS"]
+__all__ = ["lint_scenario", "lint_world_file", "extremes", "fastest", "MAX_CORNERS"]
 
 MAX_CORNERS = 16
 """Parameter boxes with at most this many corners are also checked at every corner."""
@@ -86,6 +90,23 @@ def _parameter_ranges(scn: "Scenario") -> list[Diagnostic]:
     return out
 
 
+def fastest(scn: "Scenario", lanes: list[str]) -> tuple[float, str]:
+    """The highest speed [m/s] a scenario lets the ego drive along its route's ``lanes``: the
+    highest limit on them (their own or the map's default, and the signs on them), capped by the
+    ego's desired speed, and at least its speed at the start; and what set it, in words."""
+    spec, m = scn.spec, scn.map.spec
+    own = {ln.id: ln.speed_limit for road in m.roads for ln in road.lane_specs()}
+    limits = [own.get(lane) or m.default_speed_limit for lane in lanes]
+    limits += [sign.value for sign in m.speed_limits if sign.lane in lanes]
+    top = max(limits)
+    v, why = top, f"speed limit {top:g} m/s"
+    if spec.ego.desired_speed is not None:
+        v, why = min(v, spec.ego.desired_speed), why + f", desired speed {spec.ego.desired_speed:g} m/s"
+    if spec.ego.speed > v:
+        v, why = spec.ego.speed, f"start speed {spec.ego.speed:g} m/s"
+    return v, why
+
+
 def _goal_time(scn: "Scenario") -> list[Diagnostic]:
     from twolevel.world.loader import _read_kind, _route_lanes, lane_lengths, route_length, successors
 
@@ -96,14 +117,8 @@ def _goal_time(scn: "Scenario") -> list[Diagnostic]:
     if lanes is None:
         return []
     length = route_length(spec, lanes, lane_lengths(m))
-    own = {ln.id: ln.speed_limit for road in m.roads for ln in road.lane_specs()}
-    limits = [own.get(lane) or m.default_speed_limit for lane in lanes]
-    limits += [sign.value for sign in m.speed_limits if sign.lane in lanes]
-    fastest = max(limits)
-    if spec.ego.desired_speed is not None:
-        fastest = min(fastest, spec.ego.desired_speed)
-    fastest = max(fastest, spec.ego.speed)
-    least = length / fastest  # [s] a lower bound: no acceleration, no stop
+    fastest_v, _ = fastest(scn, lanes)
+    least = length / fastest_v  # [s] a lower bound: no acceleration, no stop
     by = spec.expect.goal.by
     deadline, loc = (by, ("expect", "goal", "by")) if by is not None and by < spec.run.duration else \
         (spec.run.duration, ("run", "duration"))
@@ -114,13 +129,37 @@ def _goal_time(scn: "Scenario") -> list[Diagnostic]:
     if span is None:
         return []
     return [YML427(f"the goal is out of reach: the route is {length:.0f} m long, at least {least:.1f} s at "
-                   f"{fastest:g} m/s, but {'the deadline' if loc[0] == 'expect' else 'the run'} is {deadline:g} s",
+                   f"{fastest_v:g} m/s, but {'the deadline' if loc[0] == 'expect' else 'the run'} is {deadline:g} s",
                    span, hint="lengthen the run, move the goal closer, or set 'expect: {goal: false}'")]
+
+
+def _sensing(scn: "Scenario") -> list[Diagnostic]:
+    """YML431, at ``controller.sensor_range`` (or the section, or the file, where it is not given)."""
+    from twolevel.world.assumptions import safe_distance
+    from twolevel.world.loader import _read_kind, _route_lanes, sensing_of, successors
+
+    spec = scn.spec
+    lanes = _route_lanes(spec, successors(scn.map.spec)) or [spec.route.start.lane]
+    v, why = fastest(scn, lanes)
+    sense = sensing_of(spec)
+    need = float(safe_distance(v, 0.0, sense.response)) + spec.ego.box.length + sense.margin
+    if need <= sense.range + 1e-9:
+        return []
+    doc, _ = _read_kind(Path(scn.path), "scenario", None)
+    if doc is None:
+        return []
+    r = sense.response
+    return [YML431(
+        f"sensing range {sense.range:g} m is shorter than the {need:.1f} m the ego needs to stop behind a standing "
+        f"car at {v:g} m/s ({why}; response {r.time:g} s, braking {r.brake_min:g} m/s², one car length and "
+        f"{sense.margin:g} m); it will drive at most {sense.v_bound:.1f} m/s",
+        doc.locate(("controller", "sensor_range"), value=True),
+        hint=f"set controller.sensor_range to at least {math.ceil(need)} m, or lower the speed this scenario allows")]
 
 
 def lint_scenario(scn: "Scenario") -> list[Diagnostic]:
     """Every warning of this module for a loaded scenario."""
-    return _parameter_ranges(scn) + _goal_time(scn)
+    return _parameter_ranges(scn) + _goal_time(scn) + _sensing(scn)
 
 
 def lint_world_file(path: str) -> list[Diagnostic]:

@@ -11,7 +11,6 @@ Imported by ``twolevel check``: pydantic, PyYAML and the standard library only (
 from __future__ import annotations
 
 import difflib
-import math
 import os
 import re
 import typing
@@ -24,7 +23,7 @@ from pydantic import BaseModel, ValidationError
 from twolevel.diagnostics import Diagnostic, Span
 from twolevel.world.codes import (
     YML410, YML411, YML412, YML413, YML414, YML415, YML416, YML417, YML418, YML419, YML420, YML421,
-    YML423, YML428, YML430, YML431,
+    YML423, YML428, YML430,
 )
 from twolevel.world.document import Document, Path_, read_document
 from twolevel.world.layout import check_layout, lane_lengths
@@ -35,7 +34,7 @@ if typing.TYPE_CHECKING:
     from twolevel.world.assumptions import ResponseBounds
 
 __all__ = ["Map", "Scenario", "RuleFile", "Sensing", "load_map", "load_scenario", "check_world_file", "file_kind",
-           "sensing_of", "allowed_speed"]
+           "sensing_of"]
 
 
 @dataclass(frozen=True)
@@ -487,24 +486,11 @@ def sensing_of(spec: ScenarioFile) -> Sensing:
     return Sensing(response, rng, c.D_safe, stopping_speed(rng - spec.ego.box.length - c.D_safe, response))
 
 
-def allowed_speed(spec: ScenarioFile, m: MapFile, succ: dict[str, list[str]]) -> tuple[float, float]:
-    """The fastest the scenario lets the ego drive [m/s]: the highest limit on its route's lanes
-    (their own or the map's default, and the signs on them), capped by the ego's desired speed;
-    and that highest limit [m/s]."""
-    lanes = set(_route_lanes(spec, succ) or [spec.route.start.lane])
-    limits = [ln.speed_limit or m.default_speed_limit for road in m.roads for ln in road.lane_specs() if ln.id in lanes]
-    limits += [sign.value for sign in m.speed_limits if sign.lane in lanes]
-    top = max(limits, default=m.default_speed_limit)
-    return (top if spec.ego.desired_speed is None else min(top, spec.ego.desired_speed)), top
-
-
 def _check_controller(spec: ScenarioFile, doc: Document, m: MapFile, succ: dict[str, list[str]]) -> list[Diagnostic]:
     """The look-ahead is whole periods and consistent (YML430, at the setting it names); the
-    sensing range is at least r_near (YML414); a warning (YML431) when the ego cannot stop within
-    its sensing range from the speeds the scenario allows: it will then keep below the speed it
-    can stop from (:class:`Sensing`), slower than the scenario asks."""
-    from twolevel.control.high_level.settings import look_ahead_periods
-    from twolevel.world.assumptions import safe_distance
+    sensing range is at least r_near (YML414). (Whether the ego can stop within it is a warning
+    of :mod:`twolevel.world.lint`.)"""
+    from twolevel.world.look_ahead import look_ahead_periods
 
     c = spec.controller
     out: list[Diagnostic] = []
@@ -523,20 +509,6 @@ def _check_controller(spec: ScenarioFile, doc: Document, m: MapFile, succ: dict[
         out.append(YML414(f"sensor_range = {c.sensor_range:g} m is shorter than r_near = {c.r_near:g} m",
                           doc.locate(("controller", "sensor_range"), value=True),
                           hint="the MPC constrains the vehicles within r_near, which the ego must see"))
-        return out
-    sense = sensing_of(spec)
-    v, top = allowed_speed(spec, m, succ)
-    need = float(safe_distance(v, 0.0, sense.response)) + spec.ego.box.length + sense.margin
-    if need > sense.range + 1e-9:
-        r = sense.response
-        why = f"speed limit {top:g} m/s" + (f", desired speed {spec.ego.desired_speed:g} m/s"
-                                            if spec.ego.desired_speed is not None else "")
-        out.append(YML431(
-            f"sensing range {sense.range:g} m is shorter than the {need:.1f} m the ego needs to stop behind a standing "
-            f"car at {v:g} m/s ({why}; response {r.time:g} s, braking {r.brake_min:g} m/s², one car length and "
-            f"{sense.margin:g} m); it will drive at most {sense.v_bound:.1f} m/s",
-            doc.locate(("controller", "sensor_range"), value=True),
-            hint=f"set controller.sensor_range to at least {math.ceil(need)} m, or lower the speed this scenario allows"))
     return out
 
 

@@ -5,7 +5,7 @@ Passed whole to the functions of one step (:func:`~twolevel.control.high_level.l
 and the solve paths of :mod:`twolevel.control.high_level.solvers`). The NMPC baseline reads
 the fine part of the horizon, the period and the weights.
 
-**The look-ahead** (:func:`look_ahead_periods`): H steps of the period dt (the *fine part*, the
+**The look-ahead** (:func:`~twolevel.world.look_ahead.look_ahead_periods`): H steps of the period dt (the *fine part*, the
 paper's H = 10 at dt = 0.1 s), then *coarse* steps up to ``horizon_s`` (default
 :data:`DEFAULT_HORIZON_S`; coarse steps of :data:`COARSE_PERIODS` periods, the last one shorter
 when the rest is not a multiple, or an explicit list ``coarse_steps``). Every step is a whole
@@ -15,72 +15,21 @@ further than H·dt is reported by ``twolevel check``); the coarse part carries t
 step discretised exactly for its length), the drivable band, the speed bounds (the limit in
 force when a rule reads ``v_max``, and what the car can see) and RSS's distance to the vehicle
 ahead (:mod:`twolevel.control.high_level.guards`). ``horizon_s`` = H·dt is the paper's uniform
-horizon. Pure Python: ``twolevel check`` validates a scenario's ``controller:`` section with it.
+horizon.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Any, Sequence
+from typing import Any
 
-__all__ = ["Weights", "MPCSettings", "SOLVERS", "DEFAULT_HORIZON_S", "COARSE_PERIODS", "MAX_COARSE_STEPS",
-           "look_ahead_periods"]
+from twolevel.world.look_ahead import COARSE_PERIODS, DEFAULT_HORIZON_S, MAX_COARSE_STEPS, look_ahead_periods
+
+__all__ = ["Weights", "MPCSettings", "SOLVERS"]
 
 SOLVERS = ("modes", "highs", "gurobi")
 """The solve paths (:mod:`twolevel.control.high_level.solvers`)."""
-
-DEFAULT_HORIZON_S = 5.0
-"""[s] The default look-ahead: long enough to stop from the speeds of the paper's scenarios with
-a comfortable deceleration (14 m/s at 4 m/s² takes 3.5 s), and the horizon of the fail-safe
-verification's fine intervals and more (:mod:`twolevel.safety.verify`)."""
-
-COARSE_PERIODS = 5
-"""Periods per coarse step by default (0.5 s at the paper's dt = 0.1 s)."""
-
-MAX_COARSE_STEPS = 50
-"""At most that many coarse steps (each adds a step of columns and rows to every MPC model)."""
-
-
-def _periods(value: float, dt: float, what: str) -> int:
-    """``value`` [s] as a whole number ≥ 1 of periods ``dt`` [s]; ValueError otherwise."""
-    n = round(value / dt)
-    if n < 1 or abs(value - n * dt) > 1e-6 * max(1.0, abs(value)):
-        raise ValueError(f"{what} = {value:g} s is not a whole number of periods dt = {dt:g} s")
-    return int(n)
-
-
-def look_ahead_periods(H: int, dt: float, horizon_s: float | None = None, coarse_dt: float | None = None,
-                     coarse_steps: Sequence[float] | None = None) -> tuple[int, ...]:
-    """The MPC's step lengths as whole numbers of periods dt [s]: ``H`` steps of one period, then coarse steps up to
-    ``horizon_s`` [s] (None: the larger of :data:`DEFAULT_HORIZON_S` and H·dt, or H·dt plus the
-    explicit ``coarse_steps``), each ``coarse_dt`` [s] long (None: :data:`COARSE_PERIODS`·dt) with
-    a shorter last one when the rest is not a multiple, or exactly ``coarse_steps`` [s]. Raises
-    ValueError (a message naming the setting) for lengths that are not whole numbers of periods,
-    a look-ahead shorter than the fine part, both ``coarse_dt`` and ``coarse_steps``, a
-    ``horizon_s`` that disagrees with ``coarse_steps``, or more than :data:`MAX_COARSE_STEPS`."""
-    if coarse_dt is not None and coarse_steps is not None:
-        raise ValueError("give coarse_dt or coarse_steps, not both")
-    fine = H * dt
-    if coarse_steps is not None:
-        periods = [_periods(float(c), dt, "a coarse step") for c in coarse_steps]
-        if horizon_s is not None and _periods(horizon_s, dt, "horizon_s") != H + sum(periods):
-            raise ValueError(f"horizon_s = {horizon_s:g} s differs from H·dt + the coarse steps = "
-                             f"{fine + sum(periods) * dt:g} s")
-    else:
-        if horizon_s is None:
-            total = max(round(DEFAULT_HORIZON_S / dt), H)
-        else:
-            total = _periods(horizon_s, dt, "horizon_s")
-            if total < H:
-                raise ValueError(f"horizon_s = {horizon_s:g} s is shorter than the fine part H·dt = {fine:g} s")
-        c = COARSE_PERIODS if coarse_dt is None else _periods(coarse_dt, dt, "coarse_dt")
-        rest = total - H
-        periods = [c] * (rest // c) + ([rest % c] if rest % c else [])
-    if len(periods) > MAX_COARSE_STEPS:
-        raise ValueError(f"{len(periods)} coarse steps; at most {MAX_COARSE_STEPS} (use longer coarse steps)")
-    return (1,) * H + tuple(periods)
-
 
 @dataclass(frozen=True)
 class Weights:
@@ -103,7 +52,7 @@ class MPCSettings:
     dt: float = 0.1
     """Period [s]."""
     horizon_s: float | None = None
-    """[s] The whole look-ahead (:func:`look_ahead_periods`; None: its default); H·dt: the paper's
+    """[s] The whole look-ahead (:func:`~twolevel.world.look_ahead.look_ahead_periods`; None: its default); H·dt: the paper's
     uniform horizon."""
     coarse_dt: float | None = None
     """[s] Length of the coarse steps (None: :data:`COARSE_PERIODS` periods)."""
@@ -150,7 +99,7 @@ class MPCSettings:
     sensing range from the last fine step to the end of the look-ahead (conservative linear rows,
     :func:`twolevel.control.high_level.guards.rss_guard`)."""
     periods: tuple[int, ...] = field(init=False, repr=False, compare=False)
-    """The steps of the whole look-ahead in periods dt (:func:`look_ahead_periods`; the first H are 1)."""
+    """The steps of the whole look-ahead in periods dt (:func:`~twolevel.world.look_ahead.look_ahead_periods`; the first H are 1)."""
 
     def __post_init__(self) -> None:
         if self.H < 1 or not (self.dt > 0 and math.isfinite(self.dt)):
