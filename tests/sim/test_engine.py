@@ -76,6 +76,7 @@ participants:
   - {{id: stalled, behaviour: stationary, start: {{lane: middle, s: 50}}}}
   - {{id: beside, behaviour: idm, start: {{lane: left, s: 10}}, speed: 9.0}}
 rules: ["{RULES / 'collision.stl'}"]
+controller: {{horizon_s: 1.0, rss: false}}  # the paper's MPC, which drives at the stalled car
 run: {{duration: 6, seed: 1}}
 """)
     return path
