@@ -154,7 +154,7 @@ def safe_speed(gap: float, v_front: float = 0.0, r: ResponseBounds = RSS_BOUNDS)
     if c >= 0:
         return 0.0
     p = rho + rho * acc / b  # v²/(2b) + p·v + c = 0
-    return (-p + math.sqrt(p * p - 2 * c / b)) * b
+    return max(0.0, (-p + math.sqrt(p * p - 2 * c / b)) * b)  # (rounding: never below 0)
 
 
 def stopping_speed(distance: float, r: ResponseBounds = RSS_BOUNDS) -> float:
