@@ -212,3 +212,19 @@ def test_the_look_ahead_alone_stops_behind_the_stalled_car(tmp_path: Path) -> No
     alone, _, run = simulate(tmp_path, "stalled_one_lane", duration=12.0, safety=False, paper=False)
     assert not alone.collisions and alone.min_gap > 0
     assert max(abs(a) for a in run.columns["a"]) < 8.0  # slows early instead of at the tyre limit
+
+
+def test_regression_an_ego_behind_its_route_start_is_verified(tmp_path: Path) -> None:
+    """The verifier looked for the route piece the ego is on among those starting behind it and
+    found none when the ego started before the route's start (s < 0): the run crashed at step 0."""
+    (tmp_path / "s.yaml").write_text(f"""kind: scenario
+name: behind_route_start
+map: {MAPS / 'one_lane.yaml'}
+ego: {{start: {{lane: lane, s: 0}}, speed: 8.0}}
+route: {{start: {{lane: lane, s: 20}}, goal: {{lane: lane, s: 380}}}}
+participants: [{{id: stalled, behaviour: stationary, start: {{lane: lane, s: 200}}}}]
+run: {{duration: 1, seed: 0}}
+""")
+    s, diags = simulate_scenario(str(tmp_path / "s.yaml"), str(tmp_path / "run"), frames=False)
+    assert s is not None and s.status == "complete", [d.message for d in diags]
+    assert s.safe_start is True

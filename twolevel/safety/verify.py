@@ -208,7 +208,8 @@ def _excluded(ctx: Context, traffic: TrafficState, s_ego: float, e_ego: float) -
     if not inside or n == 0:
         return np.zeros(n, dtype=bool), frozenset()
     pieces = w.route.pieces
-    j = max(i for i, pc in enumerate(pieces) if pc[3] <= s_ego + 1e-9) if pieces else 0
+    # the piece the ego is on; the first one when it starts behind the route's start (s < 0)
+    j = max((i for i, pc in enumerate(pieces) if pc[3] <= s_ego + 1e-9), default=0)
     lane_e, a, _, start = pieces[j]
     s_lane = a + s_ego - start
     protected = frozenset(int(pc[0]) for pc in pieces[j:])
