@@ -96,6 +96,7 @@ def fastest(scn: "Scenario", lanes: list[str]) -> tuple[float, str]:
     ego's desired speed, and at least its speed at the start; and what set it, in words."""
     spec, m = scn.spec, scn.map.spec
     own = {ln.id: ln.speed_limit for road in m.roads for ln in road.lane_specs()}
+    own.update({ln.id: ln.speed_limit for ln in m.lanes})
     limits = [own.get(lane) or m.default_speed_limit for lane in lanes]
     limits += [sign.value for sign in m.speed_limits if sign.lane in lanes]
     top = max(limits)
@@ -108,7 +109,7 @@ def fastest(scn: "Scenario", lanes: list[str]) -> tuple[float, str]:
 
 
 def _goal_time(scn: "Scenario") -> list[Diagnostic]:
-    from twolevel.world.loader import _read_kind, _route_lanes, lane_lengths, route_length, successors
+    from twolevel.world.loader import _read_kind, _route_lanes, all_lengths, route_length, successors
 
     spec, m = scn.spec, scn.map.spec
     if spec.expect.goal is None:
@@ -116,7 +117,7 @@ def _goal_time(scn: "Scenario") -> list[Diagnostic]:
     lanes = _route_lanes(spec, successors(m))
     if lanes is None:
         return []
-    length = route_length(spec, lanes, lane_lengths(m))
+    length = route_length(spec, lanes, all_lengths(m))
     fastest_v, _ = fastest(scn, lanes)
     least = length / fastest_v  # [s] a lower bound: no acceleration, no stop
     by = spec.expect.goal.by

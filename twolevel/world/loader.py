@@ -26,6 +26,7 @@ from twolevel.world.codes import (
     YML423, YML428, YML430,
 )
 from twolevel.world.document import Document, Path_, read_document
+from twolevel.world.junction import plan_junctions
 from twolevel.world.layout import check_layout, lane_lengths
 from twolevel.world.parameters import check_variants, explain, substitute
 from twolevel.world.schema import DEFAULT_SENSOR_RANGE, MAX_ROUTE_POINTS, MapFile, ParameterDeclarations, ScenarioFile
@@ -34,7 +35,7 @@ if typing.TYPE_CHECKING:
     from twolevel.world.assumptions import ResponseBounds
 
 __all__ = ["Map", "Scenario", "RuleFile", "Sensing", "load_map", "load_scenario", "check_world_file", "file_kind",
-           "sensing_of"]
+           "sensing_of", "successors", "all_lengths"]
 
 
 @dataclass(frozen=True)
@@ -68,11 +69,12 @@ Kind = Literal["map", "scenario"]
 
 
 def file_kind(data: dict[str, Any]) -> Kind | None:
-    """``kind:`` if given, else guessed from the shape (``roads`` → map; ``ego``/``route`` → scenario)."""
+    """``kind:`` if given, else guessed from the shape (``roads``/``lanes`` → map; ``ego``/``route``
+    → scenario)."""
     kind = data.get("kind")
     if kind in ("map", "scenario"):
         return kind
-    if "roads" in data:
+    if "roads" in data or "lanes" in data:
         return "map"
     if "ego" in data or "route" in data or "map" in data:
         return "scenario"
@@ -305,8 +307,23 @@ def _check_ids(items: list[tuple[str, Path_]], doc: Document, what: str) -> list
 
 
 def successors(spec: MapFile) -> dict[str, list[str]]:
-    """Lane id → ids of the lanes that follow it."""
-    return {lane.id: list(lane.successors) for road in spec.roads for lane in road.lane_specs()}
+    """Lane id → ids of the lanes that follow it (road, free-form and junctions' connecting lanes)."""
+    out = {lane.id: list(lane.successors) for road in spec.roads for lane in road.lane_specs()}
+    for lane in spec.lanes:
+        out.setdefault(lane.id, list(lane.successors))
+    for plan in plan_junctions(spec):
+        for c in plan.connections:
+            out.setdefault(c.incoming, []).append(c.id)
+            out[c.id] = [c.outgoing]
+    return out
+
+
+def all_lengths(spec: MapFile) -> dict[str, float]:
+    """Length [m] of every lane of the map by id, junctions' connecting lanes included."""
+    out = lane_lengths(spec)
+    for plan in plan_junctions(spec):
+        out.update({c.id: c.length for c in plan.connections})
+    return out
 
 
 def _check_lane_pos(lane: str, s: float | None, loc: Path_, doc: Document, lengths: dict[str, float],
@@ -320,28 +337,63 @@ def _check_lane_pos(lane: str, s: float | None, loc: Path_, doc: Document, lengt
     return []
 
 
+_PROBLEM_CODES = {"YML415": YML415, "YML416": YML416, "YML420": YML420}
+
+
+def _check_lane_refs(spec: MapFile, doc: Document, lengths: dict[str, float]) -> list[Diagnostic]:
+    """Lanes named by successors, neighbours, markings and no-overtaking zones exist; the stretches
+    of markings and zones lie on their lanes."""
+    out: list[Diagnostic] = []
+
+    def ref(name: str | None, loc: Path_) -> None:
+        if name is not None and name not in lengths:
+            out.append(YML416(f"no lane '{name}' in the map", doc.locate(loc, value=True), hint=_suggest(name, lengths)))
+
+    for i, road in enumerate(spec.roads):
+        for j, lane in enumerate(road.lanes or []):
+            for k, nxt in enumerate(lane.successors):
+                ref(nxt, ("roads", i, "lanes", j, "successors", k))
+    for i, lane in enumerate(spec.lanes):
+        for k, nxt in enumerate(lane.successors):
+            ref(nxt, ("lanes", i, "successors", k))
+        ref(lane.adjacent_left, ("lanes", i, "adjacent_left"))
+        ref(lane.adjacent_right, ("lanes", i, "adjacent_right"))
+    for group in ("markings", "no_overtaking"):
+        for i, item in enumerate(getattr(spec, group)):
+            if item.lane not in lengths:
+                ref(item.lane, (group, i, "lane"))
+            elif item.s_range is not None and item.s_range[0] > lengths[item.lane] + 1e-6:
+                out.append(YML420(f"the stretch starts at {item.s_range[0]:g} m, beyond the end of lane '{item.lane}' "
+                                  f"({lengths[item.lane]:.1f} m long)", doc.locate((group, i, "s_range"), value=True)))
+    return out
+
+
 def _check_map(spec: MapFile, doc: Document) -> list[Diagnostic]:
     out: list[Diagnostic] = []
     out += _check_ids([(r.id, ("roads", i, "id")) for i, r in enumerate(spec.roads)], doc, "road")
+    plans = plan_junctions(spec)
     lanes: list[tuple[str, Path_]] = []
     for i, road in enumerate(spec.roads):
         if road.lanes is None:
             lanes.append((road.id, ("roads", i, "id")))
         else:
             lanes += [(ln.id, ("roads", i, "lanes", j, "id")) for j, ln in enumerate(road.lanes)]
+    lanes += [(ln.id, ("lanes", i, "id")) for i, ln in enumerate(spec.lanes)]
+    lanes += [(c.id, ("junctions", plan.index, "id")) for plan in plans for c in plan.connections]
     out += _check_ids(lanes, doc, "lane")
+    out += _check_ids([(j.id, ("junctions", i, "id")) for i, j in enumerate(spec.junctions)], doc, "junction")
+    for plan in plans:
+        out += [_PROBLEM_CODES[pr.code](pr.message, doc.locate(pr.at, value=pr.code != "YML415"), hint=pr.hint)
+                for pr in plan.problems]
     lengths = lane_lengths(spec)
-    for i, road in enumerate(spec.roads):
-        for j, lane in enumerate(road.lanes or []):
-            for k, nxt in enumerate(lane.successors):
-                if nxt not in lengths:
-                    out.append(YML416(f"no lane '{nxt}' in the map", doc.locate(("roads", i, "lanes", j, "successors", k), value=True),
-                                      hint=_suggest(nxt, lengths)))
+    lengths.update({c.id: c.length for plan in plans for c in plan.connections})
+    out += _check_lane_refs(spec, doc, lengths)
     items: list[tuple[str, Path_]] = []
     for group in ("speed_limits", "stop_signs", "traffic_lights"):
         for i, item in enumerate(getattr(spec, group)):
             items.append((item.id, (group, i, "id")))
             out += _check_lane_pos(item.lane, item.s, (group, i), doc, lengths)
+    items += [(line.id, ("junctions", plan.index, "id")) for plan in plans for line in plan.lines if line.kind != "yield"]
     out += _check_ids(items, doc, "sign or light")
     return out
 
@@ -405,7 +457,7 @@ def _check_route_length(spec: ScenarioFile, lanes: list[str], lengths: dict[str,
 
 def _check_scenario(spec: ScenarioFile, doc: Document, m: MapFile) -> list[Diagnostic]:
     out: list[Diagnostic] = []
-    lengths = lane_lengths(m)
+    lengths = all_lengths(m)
     succ = successors(m)
     r = spec.route
     out += _check_lane_pos(r.start.lane, r.start.s, ("route", "start"), doc, lengths)

@@ -25,7 +25,8 @@ from typing import Annotated, Any, Literal
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, Strict, field_validator, model_validator
 
 __all__ = [
-    "Arc", "Segment", "StartPose", "LaneSpec", "Road", "SpeedLimitSign", "StopSign", "LightCycle",
+    "Arc", "Segment", "StartPose", "LaneSpec", "Road", "FreeLane", "MarkingSpec", "ZoneSpec", "ArmSpec",
+    "ConnectionSpec", "SignalSpec", "JunctionSpec", "LaneKind", "MarkingKind", "Point", "MAX_LANE_POINTS", "MIN_WIDTH", "SpeedLimitSign", "StopSign", "LightCycle",
     "LightStep", "TrafficLight", "MapFile", "LanePos", "Placement", "Box", "Ego", "RouteSpec",
     "IDMParams", "Waypoint", "Participant", "Population", "RuleRef", "ControllerSettings",
     "RunSettings", "ScenarioFile", "KMH", "Number", "Count", "COORD_MAX", "DEFAULT_SENSOR_RANGE",
@@ -122,7 +123,30 @@ class StartPose(_Model):
     heading: Number = Field(default=0.0, ge=-360, le=360, description="direction of the first segment [deg]")
 
 
-class LaneSpec(_Model):
+LaneKind = Literal["driving", "shoulder", "parking", "bicycle", "bus", "sidewalk", "crosswalk", "restricted"]
+"""Lane types (CommonRoad's lanelet types, OpenDRIVE's lane types, SUMO's vehicle classes, in short)."""
+MarkingKind = Literal["none", "dashed", "solid", "double_solid", "dashed_solid", "solid_dashed", "curb"]
+"""Line markings, seen from the lane: a double line's first word is the line nearer to the lane
+(``dashed_solid``: this lane may cross it, the lane across may not)."""
+Point = tuple[Coord, Coord]
+"""A point [x, y] [m]."""
+MAX_LANE_POINTS = 100_000  # most points of a free-form lane's boundary or centre line
+MIN_WIDTH = 0.1  # [m] narrowest a lane may be between its ends (which may taper to 0)
+_USABLE = "part of the ego's drivable area; default: true for driving lanes only (declare a shoulder usable)"
+
+
+class _LaneCommon(_Model):
+    """What every lane may say of itself, besides its geometry."""
+
+    type: LaneKind = Field(default="driving", description="driving, shoulder, parking, bicycle, bus, sidewalk, crosswalk or restricted")
+    usable: bool | None = Field(default=None, description=_USABLE)
+    speed_limit: Number | None = Field(default=None, gt=0, le=100, description="limit from the lane's start [m/s]")
+    successors: list[str] = Field(default_factory=list, description="ids of lanes traffic continues into")
+    left_marking: MarkingKind | None = Field(default=None, description="line on the lane's left boundary, whole length (default none)")
+    right_marking: MarkingKind | None = Field(default=None, description="line on the lane's right boundary, whole length (default none)")
+
+
+class LaneSpec(_LaneCommon):
     """A lane: the road's reference line shifted sideways, driven in one direction."""
 
     id: str = Field(min_length=1, description="lane id, unique in the map")
@@ -131,8 +155,6 @@ class LaneSpec(_Model):
     direction: Literal["forward", "backward"] = Field(
         default="forward", description="'forward': traffic drives the way the road is drawn; 'backward': against it"
     )
-    speed_limit: Number | None = Field(default=None, gt=0, le=100, description="limit from the lane's start [m/s]")
-    successors: list[str] = Field(default_factory=list, description="ids of lanes traffic continues into")
 
 
 class Road(_Model):
@@ -148,6 +170,107 @@ class Road(_Model):
     def lane_specs(self) -> list[LaneSpec]:
         """The road's lanes, with the single-lane default filled in."""
         return list(self.lanes) if self.lanes is not None else [LaneSpec(id=self.id)]
+
+
+class FreeLane(_LaneCommon):
+    """A free-form lane: its boundaries in its direction of travel, point by point (``left_bound[i]``
+    faces ``right_bound[i]``, as in CommonRoad's lanelets), or its centre line and width."""
+
+    id: str = Field(min_length=1, description="lane id, unique in the map")
+    left_bound: list[Point] | None = Field(
+        default=None, min_length=2, max_length=MAX_LANE_POINTS, description="left boundary [[x, y], …] [m], in the direction of travel")
+    right_bound: list[Point] | None = Field(
+        default=None, min_length=2, max_length=MAX_LANE_POINTS, description="right boundary [[x, y], …] [m], one point facing each left one")
+    centre: list[Point] | None = Field(
+        default=None, min_length=2, max_length=MAX_LANE_POINTS, description="centre line [[x, y], …] [m] (instead of the boundaries)")
+    width: Annotated[Number, Field(ge=0, le=20)] | list[Annotated[Number, Field(ge=0, le=20)]] | None = Field(
+        default=None, description="with 'centre': the width [m], one for the whole lane or one per centre point")
+    adjacent_left: str | None = Field(default=None, description="the lane beside its left boundary (default: found where boundaries coincide)")
+    adjacent_right: str | None = Field(default=None, description="the lane beside its right boundary (default: found where boundaries coincide)")
+
+    @model_validator(mode="after")
+    def _one_form(self) -> "FreeLane":
+        bounds = self.left_bound is not None or self.right_bound is not None
+        if bounds == (self.centre is not None):
+            raise ValueError("a free-form lane is either 'left_bound' and 'right_bound' or 'centre' with 'width'")
+        if bounds and (self.left_bound is None or self.right_bound is None):
+            raise ValueError("give both 'left_bound' and 'right_bound'")
+        if bounds and self.width is not None:
+            raise ValueError("'width' goes with 'centre'; with boundaries the width is the distance between them")
+        if self.centre is not None and self.width is None:
+            raise ValueError("a lane given by its 'centre' needs its 'width' [m]")
+        return self
+
+
+class MarkingSpec(_Model):
+    """A line marking along part of a lane's boundary (the lane across gets it too, mirrored)."""
+
+    lane: str = Field(description="lane id")
+    side: Literal["left", "right"] = Field(description="which boundary, in the lane's direction of travel")
+    type: MarkingKind = Field(description="none, dashed, solid, double_solid, dashed_solid, solid_dashed or curb")
+    s_range: tuple[Along, Along] | None = Field(default=None, description="[from, to] along the lane [m]; default the whole lane")
+
+    @model_validator(mode="after")
+    def _ordered(self) -> "MarkingSpec":
+        if self.s_range is not None and self.s_range[0] > self.s_range[1]:
+            raise ValueError("'s_range' must be [from, to] with from <= to")
+        return self
+
+
+class ZoneSpec(_Model):
+    """A stretch of a lane (a no-overtaking zone: no passing over the oncoming lane)."""
+
+    lane: str = Field(description="lane id")
+    s_range: tuple[Along, Along] = Field(description="[from, to] along the lane [m]")
+
+    @model_validator(mode="after")
+    def _ordered(self) -> "ZoneSpec":
+        if self.s_range[0] > self.s_range[1]:
+            raise ValueError("'s_range' must be [from, to] with from <= to")
+        return self
+
+
+class ArmSpec(_Model):
+    """A road meeting a junction with one of its ends."""
+
+    road: str = Field(description="road id")
+    end: Literal["start", "end"] = Field(description="which end of the road meets the junction")
+    priority: Literal["priority", "yield", "stop", "signal"] = Field(
+        description="priority road, yield, stop (sign and line) or signal (a light per incoming lane)")
+    stop_time: Number = Field(default=1.0, ge=0, le=600, description="standstill a stop arm requires [s]")
+    phase: Count | None = Field(default=None, ge=0, le=7, description="signal phase; default: opposite arms share one")
+
+
+class ConnectionSpec(_Model):
+    """A turning connection added (``allow: true``) or removed (``allow: false``)."""
+
+    incoming: str = Field(description="lane entering the junction")
+    outgoing: str = Field(description="lane leaving it")
+    allow: bool = Field(default=True, description="true: build it; false: leave out the one the rules would build")
+
+
+class SignalSpec(_Model):
+    """The light program of a signalised junction: its phases in turn, each green, then yellow,
+    then all red for the clearance."""
+
+    green: Number = Field(gt=0, le=3600, description="green of each phase [s]")
+    yellow: Number = Field(default=3.0, ge=0, le=60, description="yellow [s]")
+    clearance: Number = Field(default=1.0, ge=0, le=60, description="all red between phases [s]")
+    offset: Number = Field(default=0.0, ge=0, le=TIME_MAX, description="time into the cycle at t = 0 [s]")
+
+
+class JunctionSpec(_Model):
+    """A junction from a compact description: the roads meeting at it (which end, with which priority);
+    the turning lanes, stop lines, lights and conflicts are built from it (twolevel/world/junction.py)."""
+
+    id: str = Field(min_length=1, description="junction id")
+    arms: list[ArmSpec] = Field(min_length=2, max_length=8, description="the roads meeting at the junction")
+    signals: SignalSpec | None = Field(default=None, description="light program {green, yellow, clearance, offset} [s] of signal arms")
+    u_turns: bool = Field(default=False, description="build U-turns (leftmost lane back into the same road)")
+    min_radius: Number = Field(default=4.0, ge=1, le=1000, description="tightest turn a connecting lane may take [m]")
+    setback: Number = Field(default=1.0, ge=0, le=50, description="stop lines this far before an arm's end [m]")
+    speed_limit: Number | None = Field(default=None, gt=0, le=100, description="limit on the connecting lanes [m/s]; default the incoming lane's")
+    connections: list[ConnectionSpec] = Field(default_factory=list, description="connections added or removed by hand")
 
 
 class SpeedLimitSign(_Model):
@@ -207,15 +330,26 @@ class TrafficLight(_Model):
 
 
 class MapFile(_Model):
-    """A map: roads with lanes, speed-limit signs, stop signs and traffic lights."""
+    """A map: roads with lanes, free-form lanes, markings, junctions, speed-limit signs, stop signs
+    and traffic lights."""
 
     kind: Literal["map"] = Field(default="map", description="'map'")
     name: str = Field(default="", description="a name for reports")
     default_speed_limit: Number = Field(default=50 * KMH, gt=0, le=100, description="limit where no sign says otherwise [m/s]")
-    roads: list[Road] = Field(min_length=1, description="the roads")
+    roads: list[Road] = Field(default_factory=list, description="the roads")
+    lanes: list[FreeLane] = Field(default_factory=list, description="free-form lanes (boundaries, or centre line and width)")
+    markings: list[MarkingSpec] = Field(default_factory=list, description="line markings along parts of lane boundaries")
+    no_overtaking: list[ZoneSpec] = Field(default_factory=list, description="no-overtaking zones {lane, s_range [m]}")
+    junctions: list[JunctionSpec] = Field(default_factory=list, description="junctions built from the roads meeting there")
     speed_limits: list[SpeedLimitSign] = Field(default_factory=list, description="speed-limit signs")
     stop_signs: list[StopSign] = Field(default_factory=list, description="stop signs")
     traffic_lights: list[TrafficLight] = Field(default_factory=list, description="traffic lights")
+
+    @model_validator(mode="after")
+    def _some_lane(self) -> "MapFile":
+        if not self.roads and not self.lanes:
+            raise ValueError("a map needs 'roads' or free-form 'lanes' (at least one)")
+        return self
 
 
 # ------------------------------------------------------------------------------ scenarios

@@ -15,15 +15,18 @@ from typing import Mapping
 import numpy as np
 
 from twolevel.world.assumptions import RSS_BOUNDS, Assumptions, ResponseBounds, from_spec
-from twolevel.world.geometry import Lane, LaneSet, Route, concatenate, lane_from_reference, resample, sample_road
+from twolevel.world.conflicts import Junctions, build_junctions
+from twolevel.world.geometry import LaneSet, Route, concatenate, resample
+from twolevel.world.junction import Plan
+from twolevel.world.lanes import build_lanes
 from twolevel.world.loader import Scenario, _route_lanes, sensing_of, successors
-from twolevel.world.schema import ControllerSettings, IDMParams, MapFile, Placement, Population
+from twolevel.world.schema import ControllerSettings, IDMParams, LightCycle, MapFile, Placement, Population
 from twolevel.world.traffic import (
     CONSTANT_VELOCITY, GREEN, IDM, RED, SCRIPTED, STATIONARY, YELLOW, Lights, Participants, SpeedLimits,
     StopLines, TrafficState,
 )
 
-__all__ = ["EgoStart", "Settings", "World", "build_world", "build_lanes", "population_slots"]
+__all__ = ["EgoStart", "Settings", "World", "build_world", "population_slots"]
 
 _KINDS = {"stationary": STATIONARY, "constant_velocity": CONSTANT_VELOCITY, "idm": IDM, "scripted": SCRIPTED}
 _STATES = {"green": GREEN, "yellow": YELLOW, "red": RED}
@@ -97,44 +100,55 @@ class World:
     route_lights: np.ndarray  # (Q,) route s [m] of light stop lines on the route
     route_light_index: np.ndarray  # (Q,) index into ``lights``
     assumptions: Assumptions = field(default_factory=Assumptions)  # about other road users (safety layer)
+    junctions: Junctions = field(default_factory=Junctions.empty)  # arms, connecting lanes, stop lines, conflicts
 
 
-def build_lanes(spec: MapFile) -> tuple[LaneSet, dict[str, int]]:
-    """All lanes of the map, sampled, with their index by id."""
-    ids = [ln.id for road in spec.roads for ln in road.lane_specs()]
-    index = {lid: i for i, lid in enumerate(ids)}
-    succ = successors(spec)
-    lanes: list[Lane] = []
-    for road in spec.roads:
-        ref = sample_road(road)
-        for ln in road.lane_specs():
-            lanes.append(lane_from_reference(ref, offset=ln.offset, direction=ln.direction, lane_id=ln.id,
-                                             index=index[ln.id], width=ln.width,
-                                             successors=tuple(index[s] for s in succ[ln.id])))
-    return LaneSet.of(tuple(lanes)), index
-
-
-def _limits(spec: MapFile, lanes: LaneSet, index: dict[str, int]) -> SpeedLimits:
+def _limits(spec: MapFile, lanes: LaneSet, index: dict[str, int], plans: list[Plan]) -> SpeedLimits:
+    """Limits by (lane, s): each lane's own from its start (a junction's connecting lanes: the
+    junction's, else the one in force where the incoming lane ends), then the signs."""
     lane_start = {ln.id: ln.speed_limit for road in spec.roads for ln in road.lane_specs()}
-    keys, vals = [], []
-    for lid, i in index.items():
-        keys.append(lanes.base[i] - 0.5)
-        vals.append(lane_start[lid] or spec.default_speed_limit)
-    for sign in spec.speed_limits:
-        keys.append(lanes.base[index[sign.lane]] + sign.s)
-        vals.append(sign.value)
-    order = np.argsort(keys, kind="stable")
-    return SpeedLimits(np.asarray(keys)[order], np.asarray(vals)[order], lanes.base)
+    lane_start.update({ln.id: ln.speed_limit for ln in spec.lanes})
+    conns = {c.id: (spec.junctions[plan.index].speed_limit, c.incoming) for plan in plans for c in plan.connections}
+
+    def table(names: list[str], start: dict[str, float]) -> SpeedLimits:
+        keys, vals = [], []
+        for lid in names:
+            keys.append(lanes.base[index[lid]] - 0.5)
+            vals.append(start[lid])
+        for sign in spec.speed_limits:
+            keys.append(lanes.base[index[sign.lane]] + sign.s)
+            vals.append(sign.value)
+        order = np.argsort(keys, kind="stable")
+        return SpeedLimits(np.asarray(keys)[order], np.asarray(vals)[order], lanes.base)
+
+    start = {lid: lane_start.get(lid) or spec.default_speed_limit for lid in index if lid not in conns}
+    if conns:
+        first = table(list(start), start)
+        for cid, (own, incoming) in conns.items():
+            i = index[incoming]
+            start[cid] = own or float(first.at(np.array([i]), np.array([lanes.length[i]]))[0])
+    return table(list(index), start)
 
 
-def _lights(spec: MapFile, index: dict[str, int]) -> Lights:
-    rows = []
+def _cycle_row(c: LightCycle | tuple[float, float, float, float]) -> tuple[list[float], list[int], float, float]:
+    green, yellow, red, offset = (c.green, c.yellow, c.red, c.offset) if isinstance(c, LightCycle) else c
+    return [0.0, green, green + yellow], [GREEN, YELLOW, RED], green + yellow + red, offset
+
+
+def _lights(spec: MapFile, index: dict[str, int], plans: list[Plan]) -> Lights:
+    """The map's lights, then one per incoming lane of every signalised junction arm."""
+    rows, ids, lanes, ss = [], [], [], []
     for tl in spec.traffic_lights:
         if tl.cycle is not None:
-            c = tl.cycle
-            rows.append(([0.0, c.green, c.green + c.yellow], [GREEN, YELLOW, RED], c.green + c.yellow + c.red, c.offset))
+            rows.append(_cycle_row(tl.cycle))
         else:
             rows.append(([st.t for st in tl.script or []], [_STATES[st.state] for st in tl.script or []], math.inf, 0.0))
+        ids.append(tl.id), lanes.append(index[tl.lane]), ss.append(tl.s)
+    for plan in plans:
+        for line in plan.lines:
+            if line.kind == "signal":
+                rows.append(_cycle_row(plan.light_cycle(line.phase)))
+                ids.append(line.id), lanes.append(index[line.lane]), ss.append(line.s)
     width = max((len(r[0]) for r in rows), default=1)
     times = np.full((len(rows), width), np.inf)
     states = np.zeros((len(rows), width), dtype=int)
@@ -142,10 +156,16 @@ def _lights(spec: MapFile, index: dict[str, int]) -> Lights:
         times[i, : len(t)] = t
         states[i, : len(s)] = s
         states[i, len(s):] = s[-1] if s else GREEN
-    return Lights(tuple(tl.id for tl in spec.traffic_lights),
-                  np.array([index[tl.lane] for tl in spec.traffic_lights], dtype=int),
-                  np.array([tl.s for tl in spec.traffic_lights], dtype=float), times, states,
+    return Lights(tuple(ids), np.array(lanes, dtype=int), np.array(ss, dtype=float), times, states,
                   np.array([r[2] for r in rows], dtype=float), np.array([r[3] for r in rows], dtype=float))
+
+
+def _stops(spec: MapFile, index: dict[str, int], plans: list[Plan]) -> StopLines:
+    """The map's stop signs, then one per incoming lane of every stop arm."""
+    rows = [(s.id, index[s.lane], s.s, s.stop_time) for s in spec.stop_signs]
+    rows += [(ln.id, index[ln.lane], ln.s, ln.stop_time) for plan in plans for ln in plan.lines if ln.kind == "stop"]
+    return StopLines(tuple(r[0] for r in rows), np.array([r[1] for r in rows], dtype=int),
+                     np.array([r[2] for r in rows], dtype=float), np.array([r[3] for r in rows], dtype=float))
 
 
 def _route(scn: Scenario, lanes: LaneSet, index: dict[str, int], limits: SpeedLimits) -> Route:
@@ -181,7 +201,9 @@ def _route(scn: Scenario, lanes: LaneSet, index: dict[str, int], limits: SpeedLi
     if spec.ego.desired_speed is not None:
         v_des = np.minimum(v_des, spec.ego.desired_speed)
     bounds = np.array([p[3] for p in pieces] + [start])
-    width = lanes.width[np.array([p[0] for p in pieces])][np.clip(np.searchsorted(bounds, s, side="right") - 1, 0, len(pieces) - 1)]
+    k = np.clip(np.searchsorted(bounds, s, side="right") - 1, 0, len(pieces) - 1)
+    piece = np.array([p[:3] for p in pieces])
+    width = lanes.width_at(piece[k, 0].astype(int), piece[k, 1] + s - bounds[k])
     return Route(pts, s, np.unwrap(heading), kappa, spacing=float(s[1] - s[0]) if len(s) > 1 else spec.route.spacing,
                  limit_s=limit_s, limit_v=limit_v, v_des=v_des, width=width, pieces=tuple(pieces))
 
@@ -221,12 +243,12 @@ def _idm_row(p: IDMParams) -> list[float]:
 def build_world(scn: Scenario) -> World:
     """The runtime :class:`World` of a loaded scenario (deterministic for the run's seed)."""
     spec = scn.spec
-    lanes, index = build_lanes(scn.map.spec)
-    limits = _limits(scn.map.spec, lanes, index)
-    lights = _lights(scn.map.spec, index)
     m = scn.map.spec
-    stops = StopLines(tuple(s.id for s in m.stop_signs), np.array([index[s.lane] for s in m.stop_signs], dtype=int),
-                      np.array([s.s for s in m.stop_signs], dtype=float), np.array([s.stop_time for s in m.stop_signs], dtype=float))
+    lanes, index, plans = build_lanes(m)
+    limits = _limits(m, lanes, index, plans)
+    lights = _lights(m, index, plans)
+    stops = _stops(m, index, plans)
+    junctions = build_junctions(lanes, index, plans, stops.ids, lights.ids)
     route = _route(scn, lanes, index, limits)
 
     rows: list[dict[str, object]] = []
@@ -278,7 +300,7 @@ def build_world(scn: Scenario) -> World:
     on_s, on_l = np.flatnonzero(~np.isnan(rs)), np.flatnonzero(~np.isnan(rl))
     return World(spec.name or scn.path, lanes, route, limits, lights, stops, parts, traffic0, ego, settings,
                  tuple((r.path, r.constants) for r in scn.rules), rs[on_s], on_s, rl[on_l], on_l,
-                 from_spec(spec.assumptions))
+                 from_spec(spec.assumptions), junctions)
 
 
 def load_rulesets(world: World) -> tuple[list, list]:
