@@ -3,10 +3,14 @@
 Built once per world (:func:`network_of` caches it) from the sampled lanes of
 :class:`~twolevel.world.geometry.LaneSet`:
 
-* **Lane groups** — lanes of one road that run the same way are exact parallel offsets of its
-  reference line (same vertices shifted along the normals), so a lane change moves between
-  members of a group at the same arc-length coordinate. ``dlat[i]`` is lane i's lateral offset
-  [m] (+ left of travel) from its group's first lane.
+* **Lane groups** — lanes beside each other that run the same way (the lane set's explicit
+  adjacency, :attr:`~twolevel.world.geometry.LaneSet.left` / ``right``), rightmost first: where a
+  lane change leads. Members that are exact parallel offsets of the group's rightmost lane (lanes
+  of one road: the same vertices shifted along the normals) share its arc-length coordinate, and
+  ``dlat[i]`` is lane i's lateral offset [m] (+ left of travel) from it. Other members (free-form
+  lanes, widths that vary) are mapped through ``root_s``, s on the rightmost lane level with
+  each of their vertices, and their bands are drawn on their own lane over the stretch that maps
+  onto the path's, widened by :data:`MAP_SLACK` (``dlat`` is then their median offset).
 * **Lane trees** — from each lane, every way forward along successors (every branch through a
   junction) up to :data:`REACH` metres: nodes ``(ref lane, offset)`` where the ref lane's s = 0
   lies ``offset`` [m] along the path from the root lane's s = 0. Two kinds: lane-bound users who
@@ -52,6 +56,9 @@ KINK = 4.0
 """The turn [rad] that marks a kink cell (its band is bounded by discs around its ends)."""
 BODY_REACH = 10.0
 """Half a long vehicle [m]: a body on a cell may reach this far into the neighbouring ones."""
+MAP_SLACK = 0.5
+"""How far [m] a stretch mapped from one lane of a group onto another (not a parallel offset of it)
+is widened at each end."""
 STOP_SIGN, LIGHT = 0, 1
 _MAX_LINES = 4  # lines per lane kept on a tree node
 
@@ -68,7 +75,11 @@ class LaneTrees:
     position ``line_x`` (N, M, K) [m]. Per tree: the largest speed limit on it ``limit`` (L,)
     [m/s], the extremes of d(ref s)/d(member s) over its members ``stretch``/``shrink`` (L,) [-]
     (a member lane on the inside of a bend is shorter than the ref lane), its ``extent`` (L,) [m]
-    (path length covered; +inf when every branch ends on the map)."""
+    (path length covered; +inf when every branch ends on the map). Per node and member: ``half``
+    (N, M) [m] half the member's width, ``own`` (N, M) whether its band is drawn on the member
+    itself (not a parallel offset of the ref lane; ``dlat`` then its median offset) and ``spread``
+    (N, M) [m] how far it may then lie beyond ``dlat`` ± ``half`` in the ref lane's frame; per node
+    ``kappa`` (N,) [1/m] the sharpest turning of its lanes (the ref's, or every member's)."""
 
     ptr: np.ndarray
     ref: np.ndarray
@@ -85,13 +96,19 @@ class LaneTrees:
     stretch: np.ndarray
     shrink: np.ndarray
     extent: np.ndarray
+    half: np.ndarray
+    own: np.ndarray
+    spread: np.ndarray
+    kappa: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
 class Network:
     """The road network for prediction and verification (see the module docstring).
 
-    ``group`` (L,) group id of each lane, ``dlat`` (L,) [m] offset in its group; ``keep`` and
+    ``group`` (L,) group id of each lane, ``dlat`` (L,) [m] offset in its group, ``exact`` (L,)
+    whether it is a parallel offset of its group's rightmost lane, ``root_s`` (K,) [m] s on that
+    lane level with each vertex of the lane set; ``keep`` and
     ``change``: the lane trees without and with lane changes; cells ``cell_ptr`` (L+1,),
     ``cell_s0``/``cell_s1`` (C,) [m], ``cell_turn`` (C,) [rad], ``cell_key`` (C,) the start's
     global key (the lane set's ``base`` + s0, sorted), ``cell_kappa`` (C,) [1/m] the largest
@@ -108,6 +125,8 @@ class Network:
     world: World
     group: np.ndarray
     dlat: np.ndarray
+    exact: np.ndarray
+    root_s: np.ndarray
     keep: LaneTrees
     change: LaneTrees
     cell_ptr: np.ndarray
@@ -132,6 +151,23 @@ class Network:
         """The lane trees of users who may (or may not) change lanes."""
         return self.change if lane_changes else self.keep
 
+    def along(self, lane: int, s: np.ndarray) -> np.ndarray:
+        """s [m] on lane ``lane`` → s on its group's rightmost lane (linear beyond its ends)."""
+        a, b = self.world.lanes.vptr[lane], self.world.lanes.vptr[lane + 1]
+        own = self.world.lanes.key[a:b] - self.world.lanes.base[lane]
+        inside = np.clip(s, own[0], own[-1])
+        return np.interp(inside, own, self.root_s[a:b]) + (s - inside)
+
+    def member_s(self, ref: int, member: int, s: np.ndarray) -> np.ndarray:
+        """s [m] on lane ``ref`` → s on lane ``member`` of its group, level with it (through the
+        group's rightmost lane; linear beyond the lanes' ends)."""
+        root = self.along(ref, s)
+        a, b = self.world.lanes.vptr[member], self.world.lanes.vptr[member + 1]
+        table = self.root_s[a:b]
+        own = self.world.lanes.key[a:b] - self.world.lanes.base[member]
+        inside = np.clip(root, table[0], table[-1])
+        return np.interp(inside, table, own) + (root - inside)
+
 
 FOREIGN_TOLERANCE = 0.05
 """Overlap with another lane [m] a standing ego may have (a touching box is not inside)."""
@@ -151,29 +187,44 @@ def network_of(world: World) -> Network:
 # ------------------------------------------------------------------------------ groups
 
 
-def _groups(world: World) -> tuple[np.ndarray, np.ndarray]:
-    """Group id and lateral offset [m] from the group's first lane, for every lane: lanes that
-    are parallel offsets of each other (same vertices along the normals, same direction)."""
-    lanes = world.lanes.lanes
-    n = len(lanes)
+def _groups(world: World) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Group id (its rightmost lane), lateral offset [m] from the rightmost lane and whether it is
+    an exact parallel offset of it, for every lane; and per vertex s [m] on the group's rightmost
+    lane level with it. Groups: chains of lanes beside each other running the same way."""
+    lanes = world.lanes
+    n = len(lanes.lanes)
     group = np.arange(n)
     dlat = np.zeros(n)
+    exact = np.ones(n, dtype=bool)
+    owner = np.repeat(np.arange(n), np.diff(lanes.vptr))
+    root_s = lanes.key - lanes.base[owner]
     for i in range(n):
-        if group[i] != i:
-            continue
-        a = lanes[i]
+        if lanes.right[i] >= 0:
+            continue  # not the rightmost lane of its group
+        a = lanes.lanes[i]
         tangent = np.stack([np.cos(a.heading), np.sin(a.heading)], axis=1)
-        for j in range(i + 1, n):
-            b = lanes[j]
-            if group[j] != j or len(b.points) != len(a.points) or np.max(np.abs(b.heading - a.heading)) > 1e-9:
-                continue
-            rel = b.points - a.points
-            along = np.einsum("kj,kj->k", rel, tangent)
-            side = tangent[:, 0] * rel[:, 1] - tangent[:, 1] * rel[:, 0]
-            if np.max(np.abs(along)) < 1e-6 and np.ptp(side) < 1e-6:
-                group[j] = i
-                dlat[j] = float(side[0])
-    return group, dlat
+        chain = [i]
+        j = int(lanes.left[i])
+        while j >= 0 and j not in chain:
+            chain.append(j)
+            j = int(lanes.left[j])
+        for j in chain[1:]:
+            group[j] = i
+            b = lanes.lanes[j]
+            lo, hi = lanes.vptr[j], lanes.vptr[j + 1]
+            if len(b.points) == len(a.points) and np.max(np.abs(b.heading - a.heading)) <= 1e-9:
+                rel = b.points - a.points
+                along = np.einsum("kj,kj->k", rel, tangent)
+                side = tangent[:, 0] * rel[:, 1] - tangent[:, 1] * rel[:, 0]
+                if np.max(np.abs(along)) < 1e-6 and np.ptp(side) < 1e-6:
+                    dlat[j] = float(side[0])
+                    root_s[lo:hi] = a.s
+                    continue
+            s, lat = lanes.project(np.full(len(b.points), i), b.points)
+            exact[j] = False
+            dlat[j] = float(np.median(lat))
+            root_s[lo:hi] = np.maximum.accumulate(s)
+    return group, dlat, exact, root_s
 
 
 # ------------------------------------------------------------------------------- cells
@@ -255,8 +306,17 @@ def _lane_limits(world: World) -> np.ndarray:
 # ------------------------------------------------------------------------------- trees
 
 
-def _trees(world: World, group: np.ndarray, dlat: np.ndarray, change: bool, limits: np.ndarray,
-           lines: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]) -> LaneTrees:
+def _level(net_root: np.ndarray, world: World, ref: int, member: int) -> np.ndarray:
+    """s [m] on lane ``ref`` level with each vertex of lane ``member`` (same group), through the
+    group's rightmost lane."""
+    ls = world.lanes
+    table = np.maximum.accumulate(net_root[ls.vptr[ref]:ls.vptr[ref + 1]])
+    return np.interp(net_root[ls.vptr[member]:ls.vptr[member + 1]], table, ls.lanes[ref].s)
+
+
+def _trees(world: World, group: np.ndarray, dlat: np.ndarray, exact: np.ndarray, root_s: np.ndarray, change: bool,
+           limits: np.ndarray, lines: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+           lane_kappa: np.ndarray) -> LaneTrees:
     lanes = world.lanes.lanes
     n = len(lanes)
     members_of = {g: sorted(np.flatnonzero(group == g).tolist(), key=lambda i: dlat[i]) for g in set(group.tolist())}
@@ -292,7 +352,8 @@ def _trees(world: World, group: np.ndarray, dlat: np.ndarray, change: bool, limi
             limit[root] = max(limit[root], max(limits[m] for m in mem))
             for m in mem:
                 if m != ref:
-                    ratio = np.diff(lanes[ref].s) / np.maximum(np.diff(lanes[m].s), 1e-12)
+                    level = lanes[ref].s if exact[m] and exact[ref] else _level(root_s, world, ref, m)
+                    ratio = np.diff(level) / np.maximum(np.diff(lanes[m].s), 1e-12)
                     ok = np.diff(lanes[m].s) > 1e-9
                     if ok.any():
                         stretch[root] = max(stretch[root], float(ratio[ok].max()))
@@ -302,19 +363,35 @@ def _trees(world: World, group: np.ndarray, dlat: np.ndarray, change: bool, limi
     M = max(len(r[5]) for r in rows)
     members = np.full((N, M), -1, dtype=int)
     dl = np.zeros((N, M))
+    half = np.zeros((N, M))
+    own = np.zeros((N, M), dtype=bool)
+    spread = np.zeros((N, M))
+    kappa = np.zeros(N)
     line = np.full((N, M, _MAX_LINES), -1, dtype=int)
     line_x = np.full((N, M, _MAX_LINES), np.inf)
+    width = world.lanes.width
     for i, (ref, _, off, _, _, mem, _) in enumerate(rows):
+        kappa[i] = lane_kappa[ref]
         for j, m in enumerate(mem):
             members[i, j] = m
             dl[i, j] = dlat[m] - dlat[ref]
+            half[i, j] = width[m] / 2
             q = lines_on[m][:_MAX_LINES]
             line[i, j, : len(q)] = q
-            # a member's line at s on the member is at the same vertex fraction on the ref lane
-            line_x[i, j, : len(q)] = off + np.interp(line_s[q], lanes[m].s, lanes[ref].s)
+            if m == ref or (exact[m] and exact[ref]):
+                # a member's line at s on the member is at the same vertex fraction on the ref lane
+                line_x[i, j, : len(q)] = off + np.interp(line_s[q], lanes[m].s, lanes[ref].s)
+                continue
+            own[i, j] = True
+            kappa[i] = max(kappa[i], lane_kappa[m])
+            line_x[i, j, : len(q)] = off + np.interp(line_s[q], lanes[m].s, _level(root_s, world, ref, m))
+            # how far the member's band strays from dl ± half in the ref's frame (for bounding circles)
+            _, lat = world.lanes.project(np.full(2 * len(lanes[m].s), ref),
+                                         np.concatenate([lanes[m].left_bound, lanes[m].right_bound]))
+            spread[i, j] = max(float(lat.max()) - dl[i, j] - half[i, j], dl[i, j] - half[i, j] - float(lat.min()), 0.0) + MAP_SLACK
     col = lambda j, dtype: np.array([r[j] for r in rows], dtype=dtype)  # noqa: E731
     return LaneTrees(np.asarray(ptr, dtype=int), col(0, int), col(1, int), col(2, float), col(3, int), col(6, int),
-                     col(4, bool), members, dl, line, line_x, limit, stretch, shrink, extent)
+                     col(4, bool), members, dl, line, line_x, limit, stretch, shrink, extent, half, own, spread, kappa)
 
 
 # ---------------------------------------------------------------------- conflict zones
@@ -390,20 +467,20 @@ def _zones(world: World, foreign: np.ndarray) -> np.ndarray:
 
 
 def _build(world: World) -> Network:
-    group, dlat = _groups(world)
+    group, dlat, exact, root_s = _groups(world)
     cells = _cells(world)
     lines = _lines(world)
     limits = _lane_limits(world)
-    keep = _trees(world, group, dlat, False, limits, lines)
-    change = _trees(world, group, dlat, True, limits, lines)
+    near = _bends_near(world, cells)
+    kappa = np.array([near[cells[0][i]:cells[0][i + 1]].max(initial=0.0) for i in range(len(world.lanes.lanes))])
+    keep = _trees(world, group, dlat, exact, root_s, False, limits, lines, kappa)
+    change = _trees(world, group, dlat, exact, root_s, True, limits, lines, kappa)
     route_lanes = frozenset(int(p[0]) for p in world.route.pieces)
     foreign, foreign_lane = _foreign(world, route_lanes, cells)
     zones = _zones(world, foreign)
     key = world.lanes.base[np.repeat(np.arange(len(cells[0]) - 1), np.diff(cells[0]))] + cells[1]
-    near = _bends_near(world, cells)
-    kappa = np.array([near[cells[0][i]:cells[0][i + 1]].max(initial=0.0) for i in range(len(world.lanes.lanes))])
-    return Network(world, group, dlat, keep, change, *cells, key, near, kappa, *lines, route_lanes, foreign,
-                   rect_axes(foreign), foreign.mean(axis=1), foreign_lane, zones)
+    return Network(world, group, dlat, exact, root_s, keep, change, *cells, key, near, kappa, *lines, route_lanes,
+                   foreign, rect_axes(foreign), foreign.mean(axis=1), foreign_lane, zones)
 
 
 def _bends_near(world: World, cells: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:

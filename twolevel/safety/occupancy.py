@@ -50,7 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from twolevel.world.assumptions import PEDESTRIAN, Assumptions
-from twolevel.safety.network import CELL_LENGTH, CELL_TURN, LIGHT, STOP_SIGN, Network
+from twolevel.safety.network import CELL_LENGTH, CELL_TURN, LIGHT, MAP_SLACK, STOP_SIGN, Network
 from twolevel.safety.polygons import OCTAGON_NORMALS, band_pieces, disc_hull_octagons, lane_point
 from twolevel.world.traffic import RED, TrafficState
 
@@ -376,7 +376,7 @@ def _tree_pieces(net: Network, tr, t: float, iv: Intervals, u: _Users, who: np.n
     hi = np.minimum(u.front_hi[p_of], cap)
     lo = np.minimum(u.rear_lo[p_of], hi - u.length[p_of][:, None])
     # on a bend a rigid box's corners reach beyond its ends' path positions by about W·L·κ/4
-    reach = (u.width[p_of] * u.length[p_of] * net.lane_kappa[ref] / 4.0)[:, None]
+    reach = (u.width[p_of] * u.length[p_of] * tr.kappa[node] / 4.0)[:, None]
     lo, hi = lo - reach, hi + reach
     a = np.where((tr.parent[node] >= 0)[:, None], np.maximum(lo - off, 0.0), lo - off)
     b = np.where(tr.leaf[node][:, None], hi - off, np.minimum(hi - off, lanes.length[ref][:, None]))
@@ -386,22 +386,24 @@ def _tree_pieces(net: Network, tr, t: float, iv: Intervals, u: _Users, who: np.n
     dl = tr.dlat[node[n_i]]  # (n, M) members' offsets from the ref lane
     # half widths: the lane's and what the body sticks out now; on a bend a rigid box also sticks
     # out of the band its centre keeps to, by L²·κ/8 at curvature κ (per cell, below)
-    bend_out = u.length[p_of[n_i]] ** 2 * net.lane_kappa[ref[n_i]] / 8.0
-    half = lanes.width[np.maximum(members[n_i], 0)] / 2 + u.extra[p_of[n_i]][:, None]
+    kappa = tr.kappa[node[n_i]]
+    bend_out = u.length[p_of[n_i]] ** 2 * kappa / 8.0
+    half = tr.half[node[n_i]] + u.extra[p_of[n_i]][:, None]
     valid = members[n_i] >= 0
     if roi is not None:  # a bounding circle of each stretch (all members), tested against the region
-        lat_lo = np.where(valid, dl - half, np.inf).min(axis=1)
-        lat_hi = np.where(valid, dl + half, -np.inf).max(axis=1)
+        spread = np.where(valid, tr.spread[node[n_i]], 0.0)  # members drawn on their own lane stray this far
+        lat_lo = np.where(valid, dl - half - spread, np.inf).min(axis=1)
+        lat_hi = np.where(valid, dl + half + spread, -np.inf).max(axis=1)
         r, pa, pb = ref[n_i], a[n_i, j_i], b[n_i, j_i]
         mid, h = lane_point(lanes, r, 0.5 * (pa + pb))
         lat = 0.5 * (lat_lo + lat_hi)
         centre = mid + lat[:, None] * np.stack([-np.sin(h), np.cos(h)], axis=1)
         length = pb - pa
-        bend = np.minimum(2.0, np.maximum(length, 1.0) * net.lane_kappa[r])  # how far the normal turns along it
+        bend = np.minimum(2.0, np.maximum(length, 1.0) * kappa)  # how far the normal turns along it
         wide = np.maximum(np.abs(lat_lo), np.abs(lat_hi))
-        slack = np.where(net.lane_kappa[r] > 0, 0.5 * np.minimum(length, CELL_LENGTH) * np.tan(CELL_TURN / 2)
+        slack = np.where(kappa > 0, 0.5 * np.minimum(length, CELL_LENGTH) * np.tan(CELL_TURN / 2)
                          + wide * np.sin(CELL_TURN), 0.0)  # what the quads add on bends
-        radius = 0.5 * length + 0.5 * (lat_hi - lat_lo) + np.abs(lat) * bend + slack + bend_out
+        radius = 0.5 * length + 0.5 * (lat_hi - lat_lo) + np.abs(lat) * bend + slack + bend_out + spread.max(axis=1)
         keep = _near(centre, radius, j_i, roi)
         n_i, j_i, dl, half, valid = n_i[keep], j_i[keep], dl[keep], half[keep], valid[keep]
     # --- per member lane ---------------------------------------------------------------------
@@ -415,6 +417,15 @@ def _tree_pieces(net: Network, tr, t: float, iv: Intervals, u: _Users, who: np.n
     member = members[n_i, m_i]
     r = ref[n_i]
     pa, pb = a[n_i, j_i], b[n_i, j_i]
+    own = tr.own[node[n_i], m_i]
+    if own.any():  # a member that is no parallel offset of the ref: its band on its own lane, mapped
+        pa, pb, dl = pa.copy(), pb.copy(), np.where(own, 0.0, dl)
+        pairs = np.unique(np.stack([r[own], member[own]], axis=1), axis=0)
+        for rf, mb in pairs:
+            at = own & (r == rf) & (member == mb)
+            pa[at] = net.member_s(int(rf), int(mb), pa[at]) - MAP_SLACK
+            pb[at] = net.member_s(int(rf), int(mb), pb[at]) + MAP_SLACK
+        r = np.where(own, member, r)
     # --- cut at the cells into quads -------------------------------------------------------
     first_c, last_c = net.cell_ptr[r], net.cell_ptr[r + 1] - 1
     c_lo = np.minimum(np.maximum(np.searchsorted(net.cell_key, lanes.base[r] + pa, side="right") - 1, first_c), last_c)

@@ -2,7 +2,8 @@
 connecting lanes with who goes first — what right-of-way signals and rules read.
 
 **Conflicts.** Two connecting lanes of one junction conflict where their areas overlap: where the
-centre of one comes closer to the other's centre line than half their two widths, unless both
+centre of one comes closer to the other's centre line than half their two widths (less
+:data:`TOUCHING`), unless both
 leave the same incoming lane (they diverge: whoever is ahead goes first). A conflict is
 :data:`MERGING` when both lead into the same lane, else :data:`CROSSING`. Its zone on each lane is
 the interval of s [m] over which that lane's centre is that close to the other lane (sampled
@@ -37,6 +38,9 @@ __all__ = ["Junctions", "build_junctions", "CROSSING", "MERGING", "SAMPLE"]
 CROSSING, MERGING = 0, 1
 SAMPLE = 0.25
 """Spacing [m] of the samples along connecting lanes at which conflicts are looked for."""
+TOUCHING = 0.05
+"""Lanes whose areas overlap by less than this [m] only touch (two turns around one corner, side by
+side): no conflict."""
 _PAIR_BLOCK = 2_000_000  # (sample, sample) pairs per block
 _OPPOSITE = math.radians(45.0)
 
@@ -121,7 +125,7 @@ def _near(pa: np.ndarray, ha: np.ndarray, va: np.ndarray, pb: np.ndarray, hb: np
     dist = np.sqrt(np.einsum("pmkj,pmkj->pmk", diff, diff))
     half_b = hb[:, None, :-1] + t * (hb[:, None, 1:] - hb[:, None, :-1])
     gap = np.where(seg_ok[:, None], dist - half_b, np.inf).min(axis=2)
-    return va & (gap < ha)
+    return va & (gap < ha - TOUCHING)
 
 
 def _zones(lanes: LaneSet, conn: np.ndarray, pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
