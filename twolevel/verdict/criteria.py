@@ -11,10 +11,11 @@ the robustness ``twolevel falsify`` minimises). The criteria (``expect:`` in the
     [s] before the deadline (``by``, else the end of the run); not reached: minus the route
     distance still to go [m].
 ``on_road``
-    every corner of the ego's box within the drivable area (any lane, or the route's lanes
-    with ``boundary: lane``) up to ``tolerance`` [m]. Measured: how far the worst corner got
-    outside (negative: how close it came to the edge). "Left the map": the reference point
-    itself was off every lane.
+    every corner of the ego's box within the drivable area (any lane of the road, the route's
+    lanes with ``boundary: lane``, or the route's drivable area with ``boundary: area``: its
+    lane, the lanes the markings let it change to, the oncoming lane where passing is allowed)
+    up to ``tolerance`` [m]. Measured: how far the worst corner got outside (negative: how close
+    it came to the edge). "Left the map": the reference point itself was off every lane.
 ``no_collision``
     no collision the ego is at fault for. A recorded collision counts as at fault unless the
     run records ``at_fault: false`` for it. Margin: the deepest at-fault overlap [m] (< 0), or
@@ -44,7 +45,7 @@ import numpy as np
 from twolevel.sim.engine import GOAL_ZONE
 from twolevel.sim.summary import intervals
 from twolevel.sim.trace import RunStatus
-from twolevel.verdict.drivable import box_outside
+from twolevel.verdict.drivable import area_outside, box_outside
 from twolevel.verdict.motion import motion_of
 from twolevel.world.schema import Expect, GoalCriterion, RoadCriterion
 
@@ -152,9 +153,11 @@ def _on_road(c: RoadCriterion, world: Any, cols: Mapping[str, Any]) -> Criterion
     t = cols["t"]
     only = sorted({p[0] for p in world.route.pieces}) if c.boundary == "lane" else None
     worst, centre = box_outside(world.lanes, cols["x"], cols["y"], cols["psi"], world.ego.length, world.ego.width, only)
+    if c.boundary == "area":
+        worst = area_outside(world.lanes, world.route, cols["x"], cols["y"], cols["psi"], world.ego.length, world.ego.width)
     measured = float(np.max(worst))
     key = ("expect", "on_road")
-    where = "the route's lanes" if c.boundary == "lane" else "the road"
+    where = {"lane": "the route's lanes", "area": "the drivable area"}.get(c.boundary, "the road")
     if measured <= c.tolerance:
         detail = (f"inside {where}; the closest corner {-measured:.2f} m from the edge" if measured <= 0 else
                   f"inside {where} within the tolerance; a corner up to {measured:.2f} m outside")

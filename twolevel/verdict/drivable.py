@@ -1,10 +1,13 @@
-"""The drivable area: the union of a map's lanes, each its centre line widened to its width.
+"""The drivable area: the union of a map's carriageway lanes, each its centre line widened to its
+width there (every lane kind but sidewalks, crosswalks and cycle lanes: :data:`ROAD_KINDS`).
 
 :func:`outside` gives, for points, how far they are outside it (> 0) or how deep inside the
 lane that holds them best (≤ 0); :func:`box_outside` does it for the ego's box over a whole
 trace (its worst corner at each step). "Left the map" is the extreme case: the reference point
 itself is outside every lane. Lanes are capsules: past a lane's end the distance is to its
-end point, unless the lane continues into another. Vectorised over points and lane intervals, in blocks.
+end point, unless the lane continues into another. Vectorised over points and lane intervals, in
+blocks. :func:`area_outside` measures the box against the route's drivable area instead (the
+lateral interval :func:`twolevel.world.area.drivable_area` allows at each route position).
 """
 
 from __future__ import annotations
@@ -14,9 +17,18 @@ from typing import Sequence
 import numpy as np
 
 from twolevel.models.obb import box_corners
-from twolevel.world.geometry import LaneSet, Polyline
+from twolevel.world.geometry import LANE_KINDS, LaneSet, Polyline, Route
 
-__all__ = ["outside", "box_outside", "lane_edges", "road_band"]
+__all__ = ["outside", "box_outside", "area_outside", "lane_edges", "road_band", "ROAD_KINDS", "road_lanes"]
+
+ROAD_KINDS = ("driving", "shoulder", "parking", "bus", "restricted")
+"""Lane kinds that make up the road a vehicle may be on (not sidewalks, crosswalks, cycle lanes)."""
+
+
+def road_lanes(lanes: LaneSet) -> np.ndarray | None:
+    """The lanes of the road (:data:`ROAD_KINDS`), or None when that is every lane."""
+    road = np.isin(lanes.kind, [LANE_KINDS.index(k) for k in ROAD_KINDS])
+    return None if road.all() else np.flatnonzero(road)
 
 _BLOCK = 256  # points per block: keeps the (points × intervals) arrays small
 
@@ -46,18 +58,20 @@ def _dead_ends(lanes: LaneSet, extend: float) -> tuple[np.ndarray, np.ndarray]:
 def outside(lanes: LaneSet, points: np.ndarray, only: Sequence[int] | None = None, extend: float = 0.0) -> np.ndarray:
     """Distance [m] of each point (M, 2) outside the drivable area (> 0), or minus its depth
     inside the lane that holds it most (≤ 0). ``only``: lane indices making up the area
-    (default: every lane of the map). ``extend`` [m]: the map's dead ends (a lane start nothing
-    leads into, a lane end leading nowhere) reach this far on, straight."""
+    (default: the lanes of the road, :func:`road_lanes`). ``extend`` [m]: the map's dead ends (a
+    lane start nothing leads into, a lane end leading nowhere) reach this far on, straight. A
+    lane's half width is its width where the point projects (constant past its ends)."""
     pts = np.asarray(points, dtype=float).reshape(-1, 2)
     a = lanes.points[:-1]
     d = lanes.points[1:] - a
     l2 = np.einsum("kj,kj->k", d, d)
     low, high = _dead_ends(lanes, extend)
     keep = (lanes.seg_lane >= 0) & (l2 > 0)
+    only = road_lanes(lanes) if only is None else only
     if only is not None:
         keep &= np.isin(lanes.seg_lane, np.asarray(list(only), dtype=int))
+    w0, w1 = lanes.widths[:-1][keep], lanes.widths[1:][keep]
     a, d, l2, low, high = a[keep], d[keep], l2[keep], low[keep], high[keep]
-    half = 0.5 * lanes.width[lanes.seg_lane[keep]]
     out = np.full(len(pts), np.inf)
     if a.size == 0:
         return out
@@ -66,7 +80,8 @@ def outside(lanes: LaneSet, points: np.ndarray, only: Sequence[int] | None = Non
         t = np.clip(np.einsum("mkj,kj->mk", rel, d) / l2, low, high)
         diff = rel - t[..., None] * d[None]
         dist = np.sqrt(np.einsum("mkj,mkj->mk", diff, diff))
-        out[lo:lo + _BLOCK] = (dist - half[None]).min(axis=1)
+        half = 0.5 * (w0 + np.clip(t, 0.0, 1.0) * (w1 - w0))
+        out[lo:lo + _BLOCK] = (dist - half).min(axis=1)
     return out
 
 
@@ -83,6 +98,22 @@ def box_outside(lanes: LaneSet, x: np.ndarray, y: np.ndarray, psi: np.ndarray, l
     return worst, outside(lanes, centre)
 
 
+def area_outside(lanes: LaneSet, route: Route, x: np.ndarray, y: np.ndarray, psi: np.ndarray, length: float,
+                 width: float) -> np.ndarray:
+    """For each sample of a trajectory, how far the box's worst corner is outside the route's
+    drivable area [m] (:func:`twolevel.world.area.drivable_area`, the oncoming lane included where
+    passing is allowed; ≤ 0: every corner inside): each corner projected onto the route near the
+    reference point's route position, against the lateral interval allowed there."""
+    from twolevel.world.area import drivable_area
+
+    x, y, psi = (np.asarray(c, dtype=float) for c in (x, y, psi))
+    s_ref, _ = route.local_coordinates(np.stack([x, y], axis=-1))
+    corners = box_corners(x, y, psi, length, width).reshape(-1, 2)
+    s, e = route.project_near(corners, np.repeat(s_ref, 4), 0.5 * float(np.hypot(length, width)) + 2.0)
+    area = drivable_area(lanes, route, np.clip(s, 0.0, route.length))
+    return np.maximum(e - area.hi, area.lo - e).reshape(-1, 4).max(axis=1)
+
+
 def lane_edges(lanes: LaneSet, spacing: float = 2.0) -> list[list[list[float]]]:
     """Both edges of every lane as polylines [[x, y], …] sampled about every ``spacing`` [m]
     (for figures: the boundary of the drivable area is where an edge borders no other lane)."""
@@ -91,7 +122,7 @@ def lane_edges(lanes: LaneSet, spacing: float = 2.0) -> list[list[list[float]]]:
         n = max(2, int(np.ceil(lane.length / spacing)) + 1)
         s = np.linspace(lane.s[0], lane.s[-1], n)
         for side in (-0.5, 0.5):
-            out.append(np.round(lane.position(s, side * lane.width), 2).tolist())
+            out.append(np.round(lane.position(s, side * lane.width_at(s)), 2).tolist())
     return out
 
 

@@ -591,11 +591,12 @@ def _paint(ls: LaneSet, rows: Sequence[MarkingRow]) -> Markings:
     keys: dict[bool, list[float]] = {True: list(ls.base - 0.5), False: list(ls.base - 0.5)}
     types: dict[bool, list[int]] = {True: [0] * len(ls.base), False: [0] * len(ls.base)}
     for (lane, left), paint in per_side.items():
-        cuts = sorted({0.0, *(max(a, 0.0) for a, _, _ in paint), *(max(b, 0.0) for _, b, _ in paint)})
+        end = float(ls.length[lane])  # a piece painted to the lane's end holds beyond it
+        cuts = sorted({0.0, *(max(a, 0.0) for a, _, _ in paint), *(max(b, 0.0) for _, b, _ in paint if b < end - 1e-9)})
         prev = 0
         for a, b in zip(cuts, cuts[1:] + [math.inf]):
             mid = 0.5 * (a + b) if math.isfinite(b) else a + 1.0
-            kind = next((k for s0, s1, k in reversed(paint) if s0 <= mid <= s1), 0)
+            kind = next((k for s0, s1, k in reversed(paint) if s0 <= mid <= (s1 if s1 < end - 1e-9 else math.inf)), 0)
             if kind != prev:  # (from the lane's first key on when painted from its start)
                 keys[left].append(float(ls.base[lane] + a) if a > 0 else float(ls.base[lane] - 0.5))
                 types[left].append(kind)

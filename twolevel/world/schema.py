@@ -605,8 +605,10 @@ class GoalCriterion(_Model):
 class RoadCriterion(_Model):
     """Stay inside the drivable area: every corner of the ego's box within the lanes."""
 
-    boundary: Literal["road", "lane"] = Field(
-        default="road", description="'road': any lane of the map; 'lane': the lanes of the route only")
+    boundary: Literal["road", "lane", "area"] = Field(
+        default="road", description="'road': any lane of the road (not sidewalks, crosswalks, cycle lanes); 'lane': the "
+                                    "lanes of the route only; 'area': the route's drivable area (its lane, the lanes beside "
+                                    "it the markings let it change to, the oncoming lane where passing is allowed)")
     tolerance: Finite = Field(default=0.5, ge=0, le=50, description="how far a corner may stray outside [m]")
 
 
