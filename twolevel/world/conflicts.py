@@ -41,7 +41,7 @@ SAMPLE = 0.25
 TOUCHING = 0.05
 """Lanes whose areas overlap by less than this [m] only touch (two turns around one corner, side by
 side): no conflict."""
-_PAIR_BLOCK = 2_000_000  # (sample, sample) pairs per block
+_CHUNK = 8  # segments per run of samples tested together
 _OPPOSITE = math.radians(45.0)
 
 
@@ -100,53 +100,73 @@ class Junctions:
         return x, side
 
 
-def _samples(lanes: LaneSet, conn: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Each connecting lane sampled every SAMPLE m, padded to one length: points (C, K, 2) [m],
-    s (C, K) [m], half widths (C, K) [m] and which samples are real (C, K)."""
+def _samples(lanes: LaneSet, conn: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Each connecting lane sampled every SAMPLE m or less, one after another: points (S, 2) [m],
+    s (S,) [m], half widths (S,) [m], the row of ``conn`` each belongs to (S,), and where each
+    row's samples start (C+1,)."""
     n = np.maximum(2, np.ceil(lanes.length[conn] / SAMPLE).astype(int) + 1)
-    K = int(n.max(initial=2))
-    frac = np.minimum(np.arange(K)[None, :] / (n[:, None] - 1), 1.0)
-    s = frac * lanes.length[conn][:, None]
-    lane = np.repeat(conn, K)
-    pts, _ = lanes.pose(lane, s.ravel())
-    half = 0.5 * lanes.width_at(lane, s.ravel())
-    return pts.reshape(len(conn), K, 2), s, half.reshape(len(conn), K), np.arange(K)[None, :] < n[:, None]
+    ptr = np.concatenate([[0], np.cumsum(n)]).astype(int)
+    row = np.repeat(np.arange(len(conn)), n)
+    k = np.arange(ptr[-1]) - ptr[row]
+    s = k / (n[row] - 1) * lanes.length[conn][row]
+    pts, _ = lanes.pose(conn[row], s)
+    return pts, s, 0.5 * lanes.width_at(conn[row], s), row, ptr
 
 
-def _near(pa: np.ndarray, ha: np.ndarray, va: np.ndarray, pb: np.ndarray, hb: np.ndarray, vb: np.ndarray) -> np.ndarray:
-    """(P, K): whether each sample of lane a comes closer to lane b's centre line (its polyline of
-    samples) than half the two widths there."""
-    seg_a, seg_d = pb[:, :-1], pb[:, 1:] - pb[:, :-1]  # (P, K-1, 2)
-    seg_ok = vb[:, :-1] & vb[:, 1:]
-    l2 = np.einsum("pkj,pkj->pk", seg_d, seg_d)
-    rel = pa[:, :, None, :] - seg_a[:, None]  # (P, K, K-1, 2)
-    t = np.clip(np.einsum("pmkj,pkj->pmk", rel, seg_d) / np.where(l2 > 0, l2, 1.0)[:, None], 0.0, 1.0)
-    diff = rel - t[..., None] * seg_d[:, None]
-    dist = np.sqrt(np.einsum("pmkj,pmkj->pmk", diff, diff))
-    half_b = hb[:, None, :-1] + t * (hb[:, None, 1:] - hb[:, None, :-1])
-    gap = np.where(seg_ok[:, None], dist - half_b, np.inf).min(axis=2)
-    return va & (gap < ha - TOUCHING)
+def _chunks(pts: np.ndarray, half: np.ndarray, ptr: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Runs of :data:`_CHUNK` segments along each row (their first sample, their row) and their
+    bounding boxes grown by the largest half width in them: start (H,), row (H,), lo, hi (H, 2)."""
+    n_seg = np.diff(ptr) - 1
+    count = (n_seg + _CHUNK - 1) // _CHUNK
+    row = np.repeat(np.arange(len(n_seg)), count)
+    first = ptr[row] + (np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)) * _CHUNK
+    last = np.minimum(first + _CHUNK, ptr[row + 1] - 1)  # the chunk's points: first..last
+    idx = first[:, None] + np.arange(_CHUNK + 1)[None, :]
+    idx = np.minimum(idx, last[:, None])
+    p = pts[idx]
+    grow = half[idx].max(axis=1)[:, None]
+    return first, row, p.min(axis=1) - grow, p.max(axis=1) + grow
 
 
 def _zones(lanes: LaneSet, conn: np.ndarray, pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For pairs (P, 2) of rows of ``conn``: whether they overlap, and the zone [s0, s1] (P, 2) [m]
-    on each."""
-    pts, s, half, valid = _samples(lanes, conn)
-    K = pts.shape[1]
-    hit = np.zeros(len(pairs), dtype=bool)
-    s0, s1 = np.zeros((len(pairs), 2)), np.zeros((len(pairs), 2))
-    step = max(1, _PAIR_BLOCK // max(K * K, 1))
-    for lo in range(0, len(pairs), step):
-        a, b = pairs[lo:lo + step, 0], pairs[lo:lo + step, 1]
-        for side, (x, y) in enumerate(((a, b), (b, a))):
-            inside = _near(pts[x], half[x], valid[x], pts[y], half[y], valid[y])
-            any_in = inside.any(axis=1)
-            lo_s = np.where(inside, s[x], np.inf).min(axis=1)
-            hi_s = np.where(inside, s[x], -np.inf).max(axis=1)
-            length = lanes.length[conn[x]]
-            s0[lo:lo + step, side] = np.where(any_in, np.maximum(lo_s - SAMPLE, 0.0), 0.0)
-            s1[lo:lo + step, side] = np.where(any_in, np.minimum(hi_s + SAMPLE, length), 0.0)
-            hit[lo:lo + step] |= any_in
+    on each. Samples of one lane are tested against the segments between samples of the other, only
+    within runs of samples whose grown bounding boxes meet."""
+    pts, s, half, row, ptr = _samples(lanes, conn)
+    first, crow, lo, hi = _chunks(pts, half, ptr)
+    cptr = np.searchsorted(crow, np.arange(len(conn) + 1))
+    P = len(pairs)
+    hit = np.zeros(P, dtype=bool)
+    s0, s1 = np.zeros((P, 2)), np.zeros((P, 2))
+    for side, (a, b) in enumerate(((pairs[:, 0], pairs[:, 1]), (pairs[:, 1], pairs[:, 0]))):
+        # chunk pairs (of a's chunks, b's chunks) of each pair whose boxes meet
+        na, nb = cptr[a + 1] - cptr[a], cptr[b + 1] - cptr[b]
+        per = na * nb
+        pair = np.repeat(np.arange(P), per)
+        j = np.arange(per.sum()) - np.repeat(np.cumsum(per) - per, per)
+        ca, cb = cptr[a][pair] + j // nb[pair], cptr[b][pair] + j % nb[pair]
+        meet = np.all((lo[ca] <= hi[cb]) & (lo[cb] <= hi[ca]), axis=1)
+        pair, ca, cb = pair[meet], ca[meet], cb[meet]
+        # every sample of a's chunk against every segment of b's chunk
+        ia = np.minimum(first[ca][:, None] + np.arange(_CHUNK + 1)[None], ptr[row[first[ca]] + 1][:, None] - 1)
+        ib = np.minimum(first[cb][:, None] + np.arange(_CHUNK)[None], ptr[row[first[cb]] + 1][:, None] - 2)
+        rel = pts[ia][:, :, None, :] - pts[ib][:, None]  # (H, B+1, B, 2): a's samples from b's segments' starts
+        d = pts[ib + 1] - pts[ib]  # (H, B, 2)
+        l2 = np.einsum("hbj,hbj->hb", d, d)
+        t = np.clip(np.einsum("habj,hbj->hab", rel, d) / np.where(l2 > 0, l2, 1.0)[:, None], 0.0, 1.0)
+        off = rel - t[..., None] * d[:, None]
+        gap = np.sqrt(np.einsum("habj,habj->hab", off, off)) - (half[ib][:, None] + t * (half[ib + 1] - half[ib])[:, None])
+        inside = gap.min(axis=2) < half[ia] - TOUCHING  # (H, B+1)
+        h, k = np.nonzero(inside)
+        who, where = pair[h], ia[h, k]
+        lo_s, hi_s = np.full(P, np.inf), np.full(P, -np.inf)
+        np.minimum.at(lo_s, who, s[where])
+        np.maximum.at(hi_s, who, s[where])
+        found = np.isfinite(lo_s)
+        length = lanes.length[conn[a]]
+        s0[:, side] = np.where(found, np.maximum(lo_s - SAMPLE, 0.0), 0.0)
+        s1[:, side] = np.where(found, np.minimum(hi_s + SAMPLE, length), 0.0)
+        hit |= found
     return hit, s0, s1
 
 

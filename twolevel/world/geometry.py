@@ -521,7 +521,7 @@ class LaneSet:
         return np.where(off, -1, lane), s, lateral
 
 
-_BESIDE_TOLERANCE = 0.05  # [m] how far past an adjacent lane's end a point may project and still lie beside it
+_BESIDE_TOLERANCE = 1.0  # [m] how far past an adjacent lane's end a point may project and still lie beside it (its end)
 
 
 def _beside(ls: LaneSet, adj: np.ndarray, left: bool) -> tuple[np.ndarray, np.ndarray]:
