@@ -84,7 +84,7 @@ def free_lanes(specs: Sequence[FreeLane], index: dict[str, int], succ: dict[str,
     for ln in specs:
         if ln.centre is not None:
             c = np.asarray(ln.centre, dtype=float)
-            w = np.asarray(ln.width if isinstance(ln.width, list) else [ln.width] * len(c), dtype=float)
+            w = np.asarray(ln.widths if ln.widths is not None else [ln.width] * len(c), dtype=float)
             left.append(None), right.append(None)
         else:
             lb, rb = np.asarray(ln.left_bound, dtype=float), np.asarray(ln.right_bound, dtype=float)

@@ -129,7 +129,7 @@ def free_centre(lane: FreeLane) -> tuple[list[tuple[float, float]], list[float]]
     """A free-form lane's centre points [m] and the width there [m]: the midpoints of facing
     boundary points and their distance, or its centre line and width."""
     if lane.centre is not None:
-        width = lane.width if isinstance(lane.width, list) else [float(lane.width or 0.0)] * len(lane.centre)
+        width = lane.widths if lane.widths is not None else [float(lane.width or 0.0)] * len(lane.centre)
         return [(float(x), float(y)) for x, y in lane.centre], [float(w) for w in width]
     left, right = lane.left_bound or [], lane.right_bound or []
     return ([(0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1])) for a, b in zip(left, right)],
@@ -298,9 +298,9 @@ def _check_free(i: int, lane: FreeLane, doc: Document) -> list[Diagnostic]:
         return [YML420(f"right_bound has {len(lane.right_bound or [])} points and left_bound {len(lane.left_bound or [])}: "
                        "the boundaries are paired point by point", doc.locate(at + ("right_bound",), value=True),
                        hint="give each left point the right point facing it (as CommonRoad lanelets do)")]
-    if not bounds and isinstance(lane.width, list) and len(lane.width) != len(lane.centre or []):
-        return [YML420(f"{len(lane.width)} widths for {len(lane.centre or [])} centre points",
-                       doc.locate(at + ("width",), value=True), hint="one width for the lane, or one per centre point")]
+    if not bounds and lane.widths is not None and len(lane.widths) != len(lane.centre or []):
+        return [YML420(f"{len(lane.widths)} widths for {len(lane.centre or [])} centre points",
+                       doc.locate(at + ("widths",), value=True), hint="one per centre point, or 'width' for the whole lane")]
     pts, width = free_centre(lane)
     out: list[Diagnostic] = []
     for k in range(1, len(pts)):
@@ -314,12 +314,12 @@ def _check_free(i: int, lane: FreeLane, doc: Document) -> list[Diagnostic]:
     inner = range(1, len(pts) - 1) if len(pts) > 2 else range(0)
     for k in inner:
         if width[k] < MIN_WIDTH:
-            where = at + ("right_bound", k) if bounds else (at + ("width", k) if isinstance(lane.width, list) else at + ("width",))
+            where = at + ("right_bound", k) if bounds else (at + ("widths", k) if lane.widths is not None else at + ("width",))
             out.append(YML420(f"the lane is {width[k]:.3g} m wide here: between its ends a lane is at least {MIN_WIDTH:g} m wide",
                               doc.locate(where, value=True), hint="only a lane's first and last points may be narrower (a taper)"))
     if max(width) < MIN_WIDTH:
         out.append(YML420(f"the lane is nowhere wider than {max(width):.3g} m (at least {MIN_WIDTH:g} m somewhere)",
-                          doc.locate(at + (("right_bound",) if bounds else ("width",)), value=True)))
+                          doc.locate(at + (("right_bound",) if bounds else ("widths",) if lane.widths is not None else ("width",)), value=True)))
     if out:
         return out
     if bounds:

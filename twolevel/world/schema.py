@@ -183,8 +183,9 @@ class FreeLane(_LaneCommon):
         default=None, min_length=2, max_length=MAX_LANE_POINTS, description="right boundary [[x, y], …] [m], one point facing each left one")
     centre: list[Point] | None = Field(
         default=None, min_length=2, max_length=MAX_LANE_POINTS, description="centre line [[x, y], …] [m] (instead of the boundaries)")
-    width: Annotated[Number, Field(ge=0, le=20)] | list[Annotated[Number, Field(ge=0, le=20)]] | None = Field(
-        default=None, description="with 'centre': the width [m], one for the whole lane or one per centre point")
+    width: Number | None = Field(default=None, gt=0, le=20, description="with 'centre': the lane's width [m]")
+    widths: list[Annotated[Number, Field(ge=0, le=20)]] | None = Field(
+        default=None, max_length=MAX_LANE_POINTS, description="with 'centre': the width at each centre point [m] (instead of 'width')")
     adjacent_left: str | None = Field(default=None, description="the lane beside its left boundary (default: found where boundaries coincide)")
     adjacent_right: str | None = Field(default=None, description="the lane beside its right boundary (default: found where boundaries coincide)")
 
@@ -195,10 +196,10 @@ class FreeLane(_LaneCommon):
             raise ValueError("a free-form lane is either 'left_bound' and 'right_bound' or 'centre' with 'width'")
         if bounds and (self.left_bound is None or self.right_bound is None):
             raise ValueError("give both 'left_bound' and 'right_bound'")
-        if bounds and self.width is not None:
+        if bounds and (self.width is not None or self.widths is not None):
             raise ValueError("'width' goes with 'centre'; with boundaries the width is the distance between them")
-        if self.centre is not None and self.width is None:
-            raise ValueError("a lane given by its 'centre' needs its 'width' [m]")
+        if self.centre is not None and (self.width is None) == (self.widths is None):
+            raise ValueError("a lane given by its 'centre' needs its 'width' [m] (or 'widths', one per centre point)")
         return self
 
 
