@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import assume, given, settings
+from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 
 from helpers.world_files import write
@@ -86,6 +86,7 @@ segment = st.one_of(st.builds(lambda L: {"line": L}, st.floats(5, 80)),
 
 
 @settings(max_examples=15, deadline=None)
+@example([{"arc": {"radius": 15.0, "angle": 69.0}}], 4.0, 3.0, 0.0, 0.0, 0)  # laterals 2e-5 m apart
 @given(st.lists(segment, min_size=1, max_size=3), st.floats(2.8, 4.0), st.floats(2.8, 4.0), st.floats(0, 1),
        st.floats(0, 1), st.integers(0, 2**31 - 1))
 def test_free_form_lanes_from_road_boundaries_are_the_same_lanes(tmp_path_factory, segments, w1, w2, f1, f2, seed):
@@ -126,7 +127,9 @@ def test_free_form_lanes_from_road_boundaries_are_the_same_lanes(tmp_path_factor
     la, sa, ea = a.lookup(pts)
     lb, sb, eb = b.lookup(pts)
     assert (la == lb).all()
-    assert np.allclose(sa, sb, atol=1e-3 + 2e-4 * sa) and np.allclose(ea, eb, atol=1e-6)
+    # laterals: the free lane's centre is the mean of sampled boundaries, the road lane's the exact
+    # offset curve; on a tight arc near a sample boundary they differ by a few 1e-5 m
+    assert np.allclose(sa, sb, atol=1e-3 + 2e-4 * sa) and np.allclose(ea, eb, atol=1e-4)
     assert np.allclose(a.width_at(lane, s), b.width_at(lane, s * b.length[lane] / a.length[lane]), atol=1e-6)
     # the route and what it carries
     ra, rb = road_w.route, free_w.route
