@@ -441,6 +441,58 @@ def report(
     raise typer.Exit(EXIT_OK)
 
 
+@app.command("import")
+def import_(
+    source: str = typer.Argument(..., metavar="SCENARIO.xml", help="A CommonRoad scenario (XML)."),
+    out: str = typer.Option(..., "--out", "-o", metavar="DIR", help="Where to write map.yaml and scenario.yaml."),
+    rules: List[str] = typer.Option([], "--rules", "-r", metavar="RULES.stl", help="A rule file the scenario lists (repeatable)."),
+    strict: bool = typer.Option(False, "--strict", help="Exit 1 when anything did not convert exactly."),
+) -> None:
+    """Convert a CommonRoad scenario into a twolevel map and scenario (pip install 'twolevel[commonroad]').
+
+    What does not convert exactly is listed (YML442/YML443, at the XML element's line). Exit 0 when
+    the written files check clean, 1 when they do not (or, with --strict, when something did not
+    convert), 2 when the source cannot be read.
+    """
+    from twolevel import pipeline
+    from twolevel.pipeline.conversion import import_scenario
+
+    res = import_scenario(source, out, rules)
+    _print_diagnostics(list(res.diagnostics))
+    if not res.written:
+        raise typer.Exit(EXIT_USAGE)
+    for path in res.written:
+        _emit(f"wrote {path}\n")
+    raise typer.Exit(pipeline.exit_code(res.diagnostics, strict=strict))
+
+
+class ExportFormat(str, enum.Enum):
+    commonroad = "commonroad"
+
+
+@app.command("export")
+def export(
+    run_dir: str = typer.Argument(..., metavar="RUN_DIR", help="A run directory written by `twolevel simulate`."),
+    fmt: ExportFormat = typer.Option(ExportFormat.commonroad, "--format", help="commonroad: a solution file and the scenario with the ego as an obstacle."),
+    out: Optional[str] = typer.Option(None, "--out", "-o", metavar="DIR", help="Where to write (default: RUN_DIR/<format>)."),
+) -> None:
+    """Export a run for other tools: with --format commonroad, solution.xml (the ego's trajectory,
+    kinematic single-track states) and the scenario with the ego as a dynamic obstacle.
+
+    Exit 0 when written (what the format cannot hold is listed, YML444), 2 when the run cannot be
+    read or the format's package is missing.
+    """
+    from twolevel.pipeline.conversion import export_run
+
+    res = export_run(run_dir, out or os.path.join(run_dir, fmt.value), fmt.value)
+    _print_diagnostics(list(res.diagnostics))
+    if not res.written:
+        raise typer.Exit(EXIT_USAGE)
+    for path in res.written:
+        _emit(f"wrote {path}\n")
+    raise typer.Exit(EXIT_OK)
+
+
 def _campaign_executor(scheduler: Optional[str], jobs: Optional[int]):  # noqa: ANN202
     from twolevel.campaign.executor import ExecutorError, make_executor
 

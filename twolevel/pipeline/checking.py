@@ -15,6 +15,7 @@ from typing import Iterable, Mapping, Sequence
 from twolevel.diagnostics import Diagnostic, Severity, Span
 from twolevel.files import read_text_quietly
 from twolevel.pipeline.codes import CLI001, CLI002, CLI003
+from twolevel.pipeline.conversion import FOREIGN_SUFFIXES, foreign_format
 
 RULE_SUFFIXES = (".stl",)
 YAML_SUFFIXES = (".yaml", ".yml")
@@ -52,12 +53,14 @@ def collect_paths(paths: Sequence[str]) -> tuple[list[str], list[Diagnostic]]:
                 diags.append(CLI003(f"no .stl, .yaml or .yml file below '{raw}'", Span.whole_file(raw)))
             files.extend(found)
         elif p.exists():
-            if not raw.endswith(RULE_SUFFIXES + YAML_SUFFIXES):
+            if raw.endswith(FOREIGN_SUFFIXES) and foreign_format(raw) is not None:
+                files.append(raw)
+            elif not raw.endswith(RULE_SUFFIXES + YAML_SUFFIXES):
                 diags.append(
                     CLI002(
-                        f"'{raw}' is not a rule file (.stl) or a map/scenario (.yaml, .yml)",
+                        f"'{raw}' is not a rule file (.stl), a map/scenario (.yaml, .yml) or a CommonRoad scenario (.xml)",
                         Span.whole_file(raw),
-                        hint="pass rule files, maps, scenarios or folders holding them",
+                        hint="pass rule files, maps, scenarios, CommonRoad XML files or folders holding them",
                     )
                 )
             else:
@@ -72,7 +75,8 @@ def collect_paths(paths: Sequence[str]) -> tuple[list[str], list[Diagnostic]]:
 
 def check(paths: Sequence[str], *, dt: float | None = None, horizon: int | None = None) -> CheckResult:
     """Check rule files, maps and scenarios (and, for a scenario, its map and rule files with
-    the signals its world provides). Nothing is solved or simulated.
+    the signals its world provides), and CommonRoad scenarios through the importer (folders:
+    only ``.stl`` and ``.yaml`` files below them). Nothing is solved or simulated.
 
     ``dt`` [s] enables the multiple-of-dt check on intervals; with ``horizon`` [steps] too,
     formulas whose future horizon exceeds ``horizon * dt`` are reported.
@@ -87,6 +91,11 @@ def check(paths: Sequence[str], *, dt: float | None = None, horizon: int | None 
             diags.extend(result.diagnostics)
             if result.source is not None:
                 sources[file] = result.source
+        elif file.endswith(FOREIGN_SUFFIXES):
+            from twolevel.pipeline.conversion import check_foreign
+
+            diags.extend(check_foreign(file))
+            sources.setdefault(file, read_text_quietly(file))
         else:
             from twolevel.world.lint import lint_world_file
             from twolevel.world.loader import check_world_file

@@ -8,8 +8,9 @@ the robustness ``twolevel falsify`` minimises). The criteria (``expect:`` in the
 ``goal``
     reached: on a route that stops at its goal, standing still within the goal zone (the run
     ends there); otherwise passing the goal zone on the route's lane. Margin: the time to spare
-    [s] before the deadline (``by``, else the end of the run); not reached: minus the route
-    distance still to go [m].
+    [s] before the deadline (``by``, else the end of the run) and, with ``after`` (a time
+    window, as CommonRoad's goals), after its opening; not reached: minus the route distance
+    still to go [m].
 ``on_road``
     every corner of the ego's box within the drivable area (any lane of the road, the route's
     lanes with ``boundary: lane``, or the route's drivable area with ``boundary: area``: its
@@ -146,6 +147,12 @@ def _goal(c: GoalCriterion, world: Any, cols: Mapping[str, Any], summary: Mappin
     if margin < 0:
         return Criterion("goal", False, reached, bound, "s", _fail(margin),
                          f"reached at {reached:.1f} s, {-margin:.1f} s after the deadline", reached, key)
+    if c.after is not None and reached < c.after:
+        return Criterion("goal", False, reached, bound, "s", _fail(reached - c.after),
+                         f"reached at {reached:.1f} s, {c.after - reached:.1f} s before the window opens",
+                         reached, ("expect", "goal", "after"))
+    if c.after is not None:
+        margin = min(margin, reached - c.after)
     return Criterion("goal", True, reached, bound, "s", margin, f"reached at {reached:.1f} s", reached, key)
 
 

@@ -186,18 +186,26 @@ def _merge(base: MotionBounds, over: Any) -> MotionBounds:
     return replace(base, **given)
 
 
-def from_spec(spec: Any) -> Assumptions:
+_USER_OF_PARTICIPANT = {"bicycle": "cyclist", "pedestrian": "pedestrian"}
+"""A participant's ``kind`` → its kind of road user (others: vehicle)."""
+
+
+def from_spec(spec: Any, kinds: Mapping[str, str] | None = None) -> Assumptions:
     """The assumptions a scenario's ``assumptions:`` section declares (the schema's model, or
-    None for the defaults): fields it leaves out keep the defaults above."""
+    None for the defaults): fields it leaves out keep the defaults above. ``kinds`` (participant
+    id → its ``kind``: bicycle, pedestrian, car, …) makes bicycles cyclists and pedestrians
+    pedestrians unless ``road_users`` names them."""
+    implied = {pid: _KIND_INDEX[_USER_OF_PARTICIPANT[k]] for pid, k in (kinds or {}).items()
+               if k in _USER_OF_PARTICIPANT}
     if spec is None:
-        return Assumptions()
+        return Assumptions(road_users=tuple(sorted(implied.items())))
     resp = RSS_BOUNDS
     if spec.response is not None:
         resp = replace(RSS_BOUNDS, **{f.name: getattr(spec.response, f.name) for f in fields(RSS_BOUNDS)
                                        if getattr(spec.response, f.name, None) is not None})
     return Assumptions(_merge(VEHICLE_BOUNDS, spec.vehicle), _merge(CYCLIST_BOUNDS, spec.cyclist),
                        _merge(PEDESTRIAN_BOUNDS, spec.pedestrian), resp,
-                       tuple(sorted((k, _KIND_INDEX[v]) for k, v in spec.road_users.items())))
+                       tuple(sorted({**implied, **{k: _KIND_INDEX[v] for k, v in spec.road_users.items()}}.items())))
 
 
 _LARGER_IS_LOOSER = ("v_max", "speed_factor", "a_max", "v_switch", "time", "accel_max", "brake_max")

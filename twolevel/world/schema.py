@@ -26,7 +26,7 @@ from pydantic import AfterValidator, BaseModel, ConfigDict, Field, Strict, field
 
 __all__ = [
     "Arc", "Segment", "StartPose", "LaneSpec", "Road", "FreeLane", "MarkingSpec", "ZoneSpec", "ArmSpec",
-    "ConnectionSpec", "SignalSpec", "JunctionSpec", "LaneKind", "MarkingKind", "Point", "MAX_LANE_POINTS", "MIN_WIDTH", "SpeedLimitSign", "StopSign", "LightCycle",
+    "ConnectionSpec", "SignalSpec", "JunctionSpec", "LaneKind", "LaneCategory", "MarkingKind", "ParticipantKind", "Point", "MAX_LANE_POINTS", "MIN_WIDTH", "SpeedLimitSign", "StopSign", "LightCycle",
     "LightStep", "TrafficLight", "MapFile", "LanePos", "Placement", "Box", "Ego", "RouteSpec",
     "IDMParams", "Waypoint", "Participant", "Population", "RuleRef", "ControllerSettings",
     "RunSettings", "ScenarioFile", "KMH", "Number", "Count", "COORD_MAX", "DEFAULT_SENSOR_RANGE",
@@ -125,6 +125,10 @@ class StartPose(_Model):
 
 LaneKind = Literal["driving", "shoulder", "parking", "bicycle", "bus", "sidewalk", "crosswalk", "restricted"]
 """Lane types (CommonRoad's lanelet types, OpenDRIVE's lane types, SUMO's vehicle classes, in short)."""
+LaneCategory = Literal["interstate", "highway", "country", "urban", "main_carriageway", "access_ramp", "exit_ramp",
+                       "drive_way", "intersection"]
+"""What road a lane belongs to (CommonRoad's lanelet types beyond the lane's use; the interstate and
+intersection rules ask for them). Carried for rules and exports; driving does not depend on it."""
 MarkingKind = Literal["none", "dashed", "solid", "double_solid", "dashed_solid", "solid_dashed", "curb"]
 """Line markings, seen from the lane: a double line's first word is the line nearer to the lane
 (``dashed_solid``: this lane may cross it, the lane across may not)."""
@@ -144,6 +148,9 @@ class _LaneCommon(_Model):
     successors: list[str] = Field(default_factory=list, description="ids of lanes traffic continues into")
     left_marking: MarkingKind | None = Field(default=None, description="line on the lane's left boundary, whole length (default none)")
     right_marking: MarkingKind | None = Field(default=None, description="line on the lane's right boundary, whole length (default none)")
+    categories: list[LaneCategory] = Field(
+        default_factory=list, description="road categories: interstate, highway, country, urban, main_carriageway, "
+                                          "access_ramp, exit_ramp, drive_way, intersection")
 
 
 class LaneSpec(_LaneCommon):
@@ -433,6 +440,9 @@ class Waypoint(_Model):
 
 
 Behaviour = Literal["stationary", "constant_velocity", "idm", "scripted"]
+ParticipantKind = Literal["car", "truck", "bus", "motorcycle", "bicycle", "pedestrian", "other"]
+"""What a participant is: bicycles are cyclists and pedestrians pedestrians to the safety layer's
+assumptions (unless ``assumptions.road_users`` says otherwise), the rest vehicles."""
 
 
 class Participant(_Model):
@@ -440,6 +450,7 @@ class Participant(_Model):
 
     id: str = Field(min_length=1, description="participant id")
     behaviour: Behaviour = Field(description="stationary, constant_velocity, idm or scripted")
+    kind: ParticipantKind = Field(default="car", description="car, truck, bus, motorcycle, bicycle, pedestrian or other")
     start: Placement | None = Field(default=None, description="initial pose (not for scripted)")
     speed: Number = Field(default=0.0, ge=0, le=100, description="initial speed [m/s]")
     box: Box = Field(default_factory=Box, description="bounding box [m]")
@@ -601,6 +612,13 @@ class GoalCriterion(_Model):
     """Reach the route's goal: stand still at it (a route that stops there) or pass it."""
 
     by: Finite | None = Field(default=None, gt=0, le=36000, description="deadline [s]; default: within the run")
+    after: Finite | None = Field(default=None, ge=0, le=36000, description="earliest arrival [s] (a time window with 'by')")
+
+    @model_validator(mode="after")
+    def _window(self) -> "GoalCriterion":
+        if self.after is not None and self.by is not None and self.after > self.by:
+            raise ValueError("'after' must not be later than 'by'")
+        return self
 
 
 class RoadCriterion(_Model):

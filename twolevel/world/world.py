@@ -300,7 +300,7 @@ def build_world(scn: Scenario) -> World:
     on_s, on_l = np.flatnonzero(~np.isnan(rs)), np.flatnonzero(~np.isnan(rl))
     return World(spec.name or scn.path, lanes, route, limits, lights, stops, parts, traffic0, ego, settings,
                  tuple((r.path, r.constants) for r in scn.rules), rs[on_s], on_s, rl[on_l], on_l,
-                 from_spec(spec.assumptions), junctions)
+                 from_spec(spec.assumptions, {p.id: p.kind for p in spec.participants}), junctions)
 
 
 def load_rulesets(world: World) -> tuple[list, list]:
