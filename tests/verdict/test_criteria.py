@@ -146,3 +146,15 @@ def test_the_report_shows_the_verdict_the_goal_and_the_road(stuck_run: Path, tmp
     summary = json.loads((tmp_path / "report" / "summary.json").read_text())
     assert summary["verdict"]["passed"] is False
     assert "## Verdict" in (tmp_path / "report" / "summary.md").read_text()
+
+
+@pytest.mark.parametrize("reached, passed, margin", [(2.0, False, -1.0), (5.0, True, 2.0), (9.0, True, 1.0),
+                                                     (11.0, False, -1.0)])
+def test_a_goal_time_window_fails_early_and_late_arrivals(road_world, reached: float, passed: bool,  # noqa: ANN001
+                                                          margin: float) -> None:
+    cols = _columns(np.linspace(5, 30, 50), np.full(50, -1.75))
+    expect = Expect.model_validate({"goal": {"after": 3, "by": 10}, "on_road": False})
+    goal = judge(expect, road_world, cols, {"goal_reached_t": reached}, "complete").get("goal")
+    assert goal.passed is passed and goal.margin == pytest.approx(margin)
+    if reached < 3:
+        assert "before the window opens" in goal.detail
