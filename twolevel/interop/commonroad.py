@@ -21,8 +21,10 @@ lxml, which it brings, gives each element's line for the findings):
   circle the square around it, a polygon its bounding box;
 * **the planning problem** (the first) → the ego's start (pose, speed), the route from the
   lanelet it starts on to the goal, and the goal: a region's centre on the lanelet under it, a
-  goal lanelet's middle, or without a position the end of the lanes straight ahead; a time
-  window → ``expect.goal`` ``after`` / ``by`` [s]; dt → ``controller.dt``.
+  goal lanelet's middle, or without a position the end of the lanes straight ahead; the route
+  stops there (the run ends when the ego stands in the goal: CommonRoad's solutions end in the
+  goal region, and the route has no lanes beyond it) unless the goal's speed window excludes
+  standing; a time window → ``expect.goal`` ``after`` / ``by`` [s]; dt → ``controller.dt``.
 
 Everything else (yield and priority signs, intersections' right of way, goal speeds and
 headings, further planning problems, environment obstacles, …) is a ``YML442`` finding at its
@@ -64,6 +66,7 @@ KINDS = {"car": "car", "taxi": "car", "priorityVehicle": "car", "parkedVehicle":
 NOT_PARTICIPANTS = {"roadBoundary", "building", "median_strip"}
 """Static obstacle types that are the road's edge, not traffic: the lanes already bound the road."""
 MIN_BOX, MAX_LENGTH, MAX_WIDTH = 0.3, 30.0, 5.0  # [m] the schema's box limits
+STOP_SPEED = 0.5  # [m/s] a goal whose speed window starts above it cannot be reached standing
 
 
 def lane_id(lanelet: int) -> str:
@@ -515,7 +518,7 @@ class _Importer:
                       f"{start_lid}", span)
         scenario["route"] = {"start": {"lane": lane_id(start_lid), "s": start_s},
                              "goal": {"lane": lane_id(goal_lid), "s": min(goal_s, lengths[goal_lid])},
-                             "stop_at_goal": False}
+                             "stop_at_goal": True}
         deadline = None
         if goal_state is not None:
             ts = getattr(goal_state, "time_step", None)
@@ -532,9 +535,11 @@ class _Importer:
             v = getattr(goal_state, "velocity", None)
             if v is not None:
                 lo_v, hi_v = (v.start, v.end) if hasattr(v, "start") else (v, v)
-                if hi_v is not None and hi_v <= 0.5:
-                    scenario["route"]["stop_at_goal"] = True
-                else:
+                if lo_v is not None and lo_v > STOP_SPEED:
+                    scenario["route"]["stop_at_goal"] = False
+                    self.note(YML442, f"the goal's speed window [{lo_v:g}, {hi_v:g}] m/s is not judged; the ego passes "
+                              "the goal without stopping (and has no route beyond it)", span)
+                elif hi_v is None or hi_v > STOP_SPEED:
                     self.note(YML442, f"the goal's speed window [{lo_v:g}, {hi_v:g}] m/s is not judged", span)
             if getattr(goal_state, "orientation", None) is not None:
                 o = goal_state.orientation

@@ -165,7 +165,7 @@ def merging() -> tuple[Any, Any]:
     lane4 = [[100, -W / 2], [200, -W / 2], [200, W / 2], [100, W / 2]]
     goal = GoalRegion([CustomState(time_step=Interval(0, 200), position=Polygon(np.array(lane4, float)))],
                       lanelets_of_goal_position={0: [4]})
-    return sc, _problem(1002, [5.0, -12.0], 8.0, goal)
+    return sc, _problem(1002, [0.0, -12.0], 8.0, goal, math.atan(12 * math.pi / 2 / 100))
 
 
 def _crossing(name: str, light: bool) -> tuple[Any, Any]:
