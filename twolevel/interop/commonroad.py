@@ -139,6 +139,15 @@ def _bounds(lanelet: Any) -> tuple[list[list[float]], list[list[float]]]:
     return left[keep].tolist(), right[keep].tolist()
 
 
+def _referencing(net: Any, attr: str) -> dict[int, list[Any]]:
+    """Sign or light id → the lanelets whose ``attr`` (``traffic_signs``, ``traffic_lights``) name it, by id."""
+    users: dict[int, list[Any]] = {}
+    for ll in sorted(net.lanelets, key=lambda x: x.lanelet_id):
+        for ref in getattr(ll, attr):
+            users.setdefault(ref, []).append(ll)
+    return users
+
+
 class _Importer:
     def __init__(self, path: str, rules: Sequence[str], out_dir: str | None) -> None:
         self.path, self.rules, self.out_dir = path, rules, out_dir
@@ -154,6 +163,7 @@ class _Importer:
 
         net = sc.lanelet_network
         out, centres, lengths = [], {}, {}
+        known = {ll.lanelet_id for ll in net.lanelets}
         for ll in sorted(net.lanelets, key=lambda x: x.lanelet_id):
             left, right = _bounds(ll)
             lid = ll.lanelet_id
@@ -170,7 +180,6 @@ class _Importer:
             cats = sorted({CATEGORIES[t] for t in types if t in CATEGORIES})
             if cats:
                 lane["categories"] = cats
-            known = {ll.lanelet_id for ll in net.lanelets}
             succ = [lane_id(s) for s in ll.successor if s in known]
             if succ:
                 lane["successors"] = succ
@@ -203,14 +212,11 @@ class _Importer:
         """Signs onto the lanes (speed limits, stop signs, no-overtaking zones); the lanelets with a stop sign."""
         net = sc.lanelet_network
         by_id = {lane["id"]: lane for lane in lanes}
-        users: dict[int, list[Any]] = {}
-        for ll in net.lanelets:
-            for sid in ll.traffic_signs:
-                users.setdefault(sid, []).append(ll)
+        users = _referencing(net, "traffic_signs")
         stopped: set[int] = set()
         for sign in sorted(net.traffic_signs, key=lambda s: s.traffic_sign_id):
             sid = sign.traffic_sign_id
-            on = sorted(users.get(sid, []), key=lambda x: x.lanelet_id)
+            on = users.get(sid, [])
             if not on:
                 self.note(YML442, f"traffic sign {sid} is referenced by no lanelet: it applies nowhere", self.lines.at(sid))
                 continue
@@ -247,15 +253,12 @@ class _Importer:
                m: dict[str, Any]) -> set[int]:
         """Lights onto the lanelets that reference them; the lanelets with a light."""
         net = sc.lanelet_network
-        users: dict[int, list[Any]] = {}
-        for ll in net.lanelets:
-            for tid in ll.traffic_lights:
-                users.setdefault(tid, []).append(ll)
+        users = _referencing(net, "traffic_lights")
         lit: set[int] = set()
         for light in sorted(net.traffic_lights, key=lambda x: x.traffic_light_id):
             tid = light.traffic_light_id
             span = self.lines.at(tid)
-            on = sorted(users.get(tid, []), key=lambda x: x.lanelet_id)
+            on = users.get(tid, [])
             if not on:
                 self.note(YML442, f"traffic light {tid} is referenced by no lanelet: it controls nothing", span)
                 continue
@@ -412,7 +415,7 @@ class _Importer:
         import numpy as np
 
         p = np.asarray(p, float)
-        under = sc.lanelet_network.find_lanelet_by_position([p])[0]
+        under = [lid for lid in sc.lanelet_network.find_lanelet_by_position([p])[0] if lid in centres]
         candidates = under or list(centres)
         best = None
         for lid in candidates:

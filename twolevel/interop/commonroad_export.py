@@ -59,20 +59,27 @@ def scenario_id_of(name: str) -> Any:
 
 
 class _Ids:
-    """Lanelet ids: ``L<n>`` keeps n; everything else gets the next free id."""
+    """CommonRoad ids (one namespace per scenario): lanes ``L<n>`` and participants ``O<n>`` keep
+    n (as the importer named them); everything else gets the next id above all of them."""
 
-    def __init__(self, lane_ids: list[str]) -> None:
-        self.kept = {lid: int(lid[1:]) for lid in lane_ids if re.fullmatch(r"L\d+", lid)}
-        self.next = max(self.kept.values(), default=0) + 1
+    def __init__(self, lane_ids: list[str], participant_ids: list[str]) -> None:
+        self.kept = {("lane", lid): int(lid[1:]) for lid in lane_ids if re.fullmatch(r"L\d+", lid)}
+        taken = set(self.kept.values())
+        for pid in participant_ids:
+            if re.fullmatch(r"O\d+", pid) and int(pid[1:]) not in taken:
+                self.kept[("participant", pid)] = int(pid[1:])
+                taken.add(int(pid[1:]))
+        self.next = max(taken, default=0) + 1
 
     def fresh(self) -> int:
         self.next += 1
         return self.next - 1
 
-    def lanelet(self, lid: str) -> int:
-        if lid not in self.kept:
-            self.kept[lid] = self.fresh()
-        return self.kept[lid]
+    def of(self, what: str, name: str) -> int:
+        """The id of lane or participant ``name`` (``what``: ``lane`` or ``participant``)."""
+        if (what, name) not in self.kept:
+            self.kept[(what, name)] = self.fresh()
+        return self.kept[(what, name)]
 
 
 def _lanelets(world: Any, spec: Any, ids: _Ids) -> tuple[Any, dict[int, int]]:
@@ -81,7 +88,7 @@ def _lanelets(world: Any, spec: Any, ids: _Ids) -> tuple[Any, dict[int, int]]:
     from commonroad.scenario.lanelet import Lanelet, LaneletNetwork, LaneletType, LineMarking
 
     lanes = world.lanes
-    lid_of = {i: ids.lanelet(lane.id) for i, lane in enumerate(lanes.lanes)}
+    lid_of = {i: ids.of("lane", lane.id) for i, lane in enumerate(lanes.lanes)}
     declared = {ln.id: ln for road in spec.roads for ln in road.lane_specs()} | {ln.id: ln for ln in spec.lanes}
     net = LaneletNetwork()
     for i, lane in enumerate(lanes.lanes):
@@ -138,7 +145,7 @@ def _signs_and_lights(world: Any, net: Any, lid_of: dict[int, int], ids: _Ids, d
         for value in sorted(set(np.round(start, 3).tolist())):
             on = [lid_of[i] for i in range(n) if round(float(start[i]), 3) == value]
             sid = ids.fresh()
-            first = lanes.lanes[[i for i in range(n) if lid_of[i] == on[0]][0]].position(0.0)
+            first = lanes.lanes[int(np.flatnonzero(np.round(start, 3) == value)[0])].position(0.0)
             net.add_traffic_sign(TrafficSign(sid, [TrafficSignElement(TrafficSignIDZamunda.MAX_SPEED, [f"{value:g}"])],
                                              set(on), np.asarray(first, float).ravel()), set(on))
     for k in range(len(world.stops.ids)):
@@ -188,8 +195,7 @@ def _obstacles(world: Any, spec_parts: list[Any], ids: _Ids, diags: list[Diagnos
     steps = int(round(world.settings.duration / dt))
     out = []
     for i, pid in enumerate(P.ids):
-        oid = int(pid[1:]) if re.fullmatch(r"O\d+", pid) and int(pid[1:]) not in ids.kept.values() else ids.fresh()
-        ids.kept[f"obstacle {pid}"] = oid
+        oid = ids.of("participant", pid)
         kind = kinds.get(pid.rsplit("-", 1)[0] if pid not in kinds else pid, "car")
         shape = _shape(kind, float(P.length[i]), float(P.width[i]))
         init = InitialState(time_step=0, position=np.array([tr.x[i], tr.y[i]], float), orientation=float(tr.psi[i]),
@@ -239,9 +245,9 @@ def _problem(world: Any, spec: Any, ego0: Any, dt: float, pid: int) -> Any:
 
     route = world.route
     end = float(route.s[-1])
-    p = np.asarray(route.position(end) if hasattr(route, "position") else route.points[-1], float).ravel()[:2]
-    h = float(route.heading_at(end)) if hasattr(route, "heading_at") else 0.0
-    width = float(route.width_at(np.array([end]))[0]) if hasattr(route, "width_at") else 3.5
+    p = np.asarray(route.position(end), float).ravel()[:2]
+    h = float(np.asarray(route.heading_at(end)).ravel()[0])
+    width = float(np.asarray(route.width_at(end)).ravel()[0])
     goal = spec.expect.goal
     lo = int(round(goal.after / dt)) if goal is not None and goal.after is not None else 0
     hi = int(round((goal.by if goal is not None and goal.by is not None else world.settings.duration) / dt))
@@ -289,7 +295,7 @@ def export_commonroad(run_dir: str | os.PathLike[str], out_dir: str | os.PathLik
     world = build_world(scn)
     dt = float(world.settings.dt)
     found: list[Diagnostic] = []
-    ids = _Ids([lane.id for lane in world.lanes.lanes])
+    ids = _Ids([lane.id for lane in world.lanes.lanes], list(world.parts.ids))
     sid = scenario_id_of(scn.spec.name)
     sc = Scenario(dt, sid)
     net, lid_of = _lanelets(world, scn.map.spec, ids)
