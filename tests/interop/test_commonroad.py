@@ -178,6 +178,7 @@ def test_without_commonroad_io_the_importer_says_what_to_install(samples: dict[s
     assert imp is None and diags[0].code == "YML440" and "twolevel[commonroad]" in diags[0].hint
 
 
+@pytest.mark.slow
 def test_cli_import_and_check_accept_the_xml(samples: dict[str, Path], tmp_path: Path) -> None:
     res = runner.invoke(app, ["import", str(samples["StopSign"]), "--out", str(tmp_path)])
     assert res.exit_code == 0, res.output
@@ -248,3 +249,23 @@ def test_an_imported_scenario_simulates_and_exports(samples: dict[str, Path], tm
     res = runner.invoke(app, ["export", str(run), "--out", str(tmp_path / "x")])
     assert res.exit_code == 0 and len(list((tmp_path / "x").glob("*.xml"))) == 2
     assert runner.invoke(app, ["export", str(tmp_path / "nothing")]).exit_code == 2
+
+
+@pytest.mark.slow
+def test_exported_lights_and_stop_lines_agree_with_the_run_at_every_step(samples: dict[str, Path], tmp_path: Path) -> None:
+    from commonroad.common.file_reader import CommonRoadFileReader
+
+    imported = tmp_path / "imported"
+    assert runner.invoke(app, ["import", str(samples["Signal"]), "--out", str(imported)]).exit_code == 0
+    run = tmp_path / "run"
+    runner.invoke(app, ["simulate", str(imported / "scenario.yaml"), "--out", str(run), "--duration", "0.3", "--no-progress"])
+    assert runner.invoke(app, ["export", str(run), "--out", str(tmp_path / "x")]).exit_code == 0
+    sc, _ = CommonRoadFileReader(str(tmp_path / "x" / "DEU_Signal-1_1_T-1.xml")).open()
+    (light,) = sc.lanelet_network.traffic_lights
+    world = build_world(load_scenario(imported / "scenario.yaml")[0])
+    names = {"green": 0, "yellow": 1, "red": 2}
+    k = np.arange(400)
+    assert np.array_equal([names[light.get_state_at_time_step(int(i)).value] for i in k], world.lights.state_at(k * 0.1)[:, 0])
+    stop = sc.lanelet_network.find_lanelet_by_id(30).stop_line
+    assert stop is not None and stop.traffic_light_ref == {light.traffic_light_id}
+    assert np.allclose(0.5 * (stop.start + stop.end), [0.0, 48.0], atol=1e-3)
