@@ -269,3 +269,24 @@ def test_exported_lights_and_stop_lines_agree_with_the_run_at_every_step(samples
     stop = sc.lanelet_network.find_lanelet_by_id(30).stop_line
     assert stop is not None and stop.traffic_light_ref == {light.traffic_light_id}
     assert np.allclose(0.5 * (stop.start + stop.end), [0.0, 48.0], atol=1e-3)
+
+
+def test_a_light_that_is_no_green_yellow_red_cycle_becomes_a_script_that_agrees(tmp_path: Path) -> None:
+    from commonroad.common.file_reader import CommonRoadFileReader
+    from commonroad.scenario.traffic_light import TrafficLightCycle, TrafficLightCycleElement, TrafficLightState
+
+    from twolevel.interop.commonroad_samples import intersection, write_scenario
+
+    sc, pps = intersection()
+    light = sc.lanelet_network.find_traffic_light_by_id(200)
+    light.traffic_light_cycle = TrafficLightCycle([TrafficLightCycleElement(TrafficLightState(s), d) for s, d in
+                                                   (("green", 20), ("red", 10), ("green", 5), ("yellow", 3))], time_offset=2)
+    path = write_scenario(sc, pps, tmp_path / "ZAM_Odd-1_1_T-1.xml")
+    imp, _ = _imported(path, tmp_path)
+    (program,) = imp.map["traffic_lights"]
+    assert "script" in program and program["script"][0] == {"t": 0.0, "state": "yellow"}
+    world = build_world(load_scenario(tmp_path / "scenario.yaml")[0])
+    cr = CommonRoadFileReader(str(path)).open()[0].lanelet_network.find_traffic_light_by_id(200)
+    k = np.arange(int(world.settings.duration / 0.1))
+    names = {"green": 0, "yellow": 1, "red": 2}
+    assert np.array_equal(world.lights.state_at(k * 0.1)[:, 0], [names[cr.get_state_at_time_step(int(i)).value] for i in k])

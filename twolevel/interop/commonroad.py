@@ -311,18 +311,13 @@ class _Importer:
                 # CommonRoad: state(k) = cycle[(k - time_offset) mod period]; twolevel: cycle[(t + offset) mod period]
                 return {"cycle": {"green": by["green"] * dt, "yellow": by.get("yellow", 0) * dt, "red": by["red"] * dt,
                                   "offset": ((-offset - start) % period) * dt}}
-        steps = max(1, int(math.ceil(duration / dt)))
-        script: list[dict[str, Any]] = []
-        for k in range(steps + 1):
-            u = (k - offset) % period if period else 0
-            acc, state = 0, shown[0]
-            for s, d in zip(shown, durs):
-                if u < acc + d:
-                    state = s
-                    break
-                acc += d
-            if not script or script[-1]["state"] != state:
-                script.append({"t": k * dt, "state": state})
+        import numpy as np
+
+        k = np.arange(max(1, int(math.ceil(duration / dt))) + 1)
+        phase = np.searchsorted(np.cumsum(durs), (k - offset) % max(period, 1), side="right")
+        state = np.asarray(shown)[np.minimum(phase, n - 1)]
+        change = np.flatnonzero(np.r_[True, state[1:] != state[:-1]])
+        script = [{"t": float(i * dt), "state": str(state[i])} for i in change]
         return {"script": script}
 
     # ----------------------------------------------------------------------- obstacles
