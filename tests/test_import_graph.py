@@ -194,7 +194,7 @@ def test_packages_import_only_their_layer_or_below() -> None:
 
 def test_the_layer_list_parses() -> None:
     found = layers()
-    assert found[0] == {"twolevel", "diagnostics", "files", "atomic"} and found[-1] == {"cli", "__main__"}
+    assert found[0] == {"twolevel", "diagnostics", "files", "atomic", "interruption"} and found[-1] == {"cli", "__main__"}
     assert [n for names in found for n in names].count("world") == 1
 
 

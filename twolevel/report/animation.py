@@ -24,9 +24,10 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from twolevel.files import open_regular
 from twolevel.models import obb
+from twolevel.sim.trace import FRAMES_FILE
 
-FRAMES_FILE = "frames.jsonl"
 EGO, PLAN, OTHER, OTHER_EDGE, LANE, PATH = "#3366cc", "#ff6600", "#999999", "#333333", "#cccccc", "#99ccff"
 LIGHT = {"red": "#cc0000", "yellow": "#ffcc00", "green": "#00cc00", "none": "#999999"}
 
@@ -52,7 +53,13 @@ def box_corners(boxes: np.ndarray) -> np.ndarray:
 def read_frames(path: str | Path, max_frames: int) -> tuple[list[dict[str, Any]], int, list[str]]:
     """Evenly subsampled frames (first and last kept), the number of readable lines, problems."""
     problems: list[str] = []
-    lines = [ln for ln in Path(path).read_text(encoding="utf-8", errors="replace").splitlines() if ln.strip()]
+    fh, refusal = open_regular(path)  # a FIFO placed there would block a plain read
+    if fh is None:
+        assert refusal is not None
+        raise OSError(refusal.detail)
+    with fh:
+        text = fh.read().decode("utf-8", errors="replace")
+    lines = [ln for ln in text.splitlines() if ln.strip()]
     if lines:
         try:
             json.loads(lines[-1])

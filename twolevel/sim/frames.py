@@ -10,12 +10,13 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from twolevel.files import create_output
+from twolevel.sim.trace import FRAMES_FILE
 from twolevel.world.traffic import GREEN, RED, YELLOW, TrafficState
 from twolevel.world.world import World
 
 __all__ = ["FRAMES_FILE", "FrameWriter", "map_lines", "light_positions"]
 
-FRAMES_FILE = "frames.jsonl"
 VIEW_RADIUS = 60.0  # [m] other vehicles drawn around the ego
 _STATE_NAMES = {GREEN: "green", YELLOW: "yellow", RED: "red"}
 
@@ -42,7 +43,7 @@ class FrameWriter:
     """Append one frame per step to ``frames.jsonl`` in the run directory."""
 
     def __init__(self, run_dir: str | os.PathLike[str], world: World) -> None:
-        self._fh = open(Path(run_dir) / FRAMES_FILE, "w", encoding="utf-8")
+        self._fh = open(create_output(Path(run_dir) / FRAMES_FILE), "w", encoding="utf-8")
         self._world = world
         self._lights = light_positions(world)
 
