@@ -255,7 +255,7 @@ def plan(
             ("solver", report_.solver),
             ("binaries / rows / columns", f"{report_.binaries} / {report_.rows} / {report_.columns}"),
             ("QPs solved", str(report_.qps)),
-            ("certified optimal", "yes" if report_.certified else "no"),
+            ("certified", report_.certificate),
         ] + [(f"time: {k} [ms]", f"{v:.2f}") for k, v in report_.solve_ms.items()]
         facts += [(f"rule {name}: robustness", f"{rob:.4g}") for name, rob in report_.rules]
         if report_.conflicts:
@@ -302,6 +302,9 @@ def _summary_rows(s) -> list[tuple[str, str]]:  # noqa: ANN001 - RunSummary, imp
         ("peak deceleration", f(s.decel_peak, "m/s²")),
         ("steps braking > 4 m/s²", "-" if s.hard_braking_share != s.hard_braking_share else f"{100 * s.hard_braking_share:.1f} %"),
     ]
+    rows.append(("no plan satisfied the rules", "never" if not s.unsatisfiable else "\n".join(
+        f"t={u.t_start:.1f}-{u.t_end:.1f} s: " + (", ".join(u.rules) if u.rules else "unexplained") + " → "
+        + ", ".join(f"{d} {n}" for d, n in sorted(u.decisions.items())) for u in s.unsatisfiable)))
     for v in s.violations:
         rows.append((f"rule {v.rule}", "holds" if v.steps == 0 else f"violated in {v.steps} steps from t={v.first_t:.1f} s (worst {v.worst:.3g})"))
     rows.append(("decisions", ", ".join(f"{k}: {n}" for k, n in sorted(s.decisions.items()))))
@@ -329,8 +332,39 @@ def simulate(
     """
     from pathlib import Path
 
-    from twolevel.sim.engine import simulate_scenario
+    from twolevel import interruption
+
+    with interruption.deferred():  # a signal stops the run where stopping is safe (run.json records it)
+        summary, diags = _simulate(scenario, out, no_monitor, no_safety, controller, nmpc_model, seed, duration,
+                                   progress)
+    interruption.checkpoint()  # a signal that came as the run ended is not swallowed
+    if summary is None:
+        _print_diagnostics(diags)
+        raise typer.Exit(EXIT_USAGE)
     from twolevel.sim.trace import RunStatus
+    from twolevel.verdict.judge import judge_run
+
+    verdict, more = judge_run(summary.run_dir, scenario)
+    _print_diagnostics(diags + more)
+    console = _console()
+    console.print(_table(f"{scenario} → {summary.run_dir}", _summary_rows(summary)))
+    if verdict is not None:
+        console.print(_criteria_table(verdict))
+    console.print(f"trace: {Path(summary.run_dir) / 'trace.csv'}   report: twolevel report {summary.run_dir}", markup=False)
+    if summary.status is not RunStatus.COMPLETE or verdict is None:
+        raise typer.Exit(EXIT_USAGE)
+    raise typer.Exit(EXIT_OK if verdict.passed else EXIT_FAIL)
+
+
+def _simulate(scenario: str, out: Optional[str], no_monitor: bool, no_safety: bool, controller: str, nmpc_model: str,
+              seed: Optional[int], duration: Optional[float], progress: bool):  # noqa: ANN202 - imported lazily
+    """``simulate_scenario`` with the command's options (and a progress bar on a terminal)."""
+    from pathlib import Path
+
+    from twolevel import interruption
+
+    interruption.checkpoint()
+    from twolevel.sim.engine import simulate_scenario
 
     run_dir = out or str(Path("runs") / Path(scenario).stem)
     ctrl = controller if controller != "nmpc" or nmpc_model == "kinematic" else f"nmpc-{nmpc_model}"
@@ -349,26 +383,10 @@ def simulate(
                        info=f"t={info.t:5.1f}/{info.duration:.0f} s  {info.rate_hz:6.1f} Hz  near={info.n_near:2d}  {info.decision}")
 
         with bar:
-            summary, diags = simulate_scenario(scenario, run_dir, monitor=not no_monitor, safety=not no_safety,
-                                               controller=ctrl, seed=seed, duration=duration, progress=on_step)
-    else:
-        summary, diags = simulate_scenario(scenario, run_dir, monitor=not no_monitor, safety=not no_safety,
-                                           controller=ctrl, seed=seed, duration=duration)
-    if summary is None:
-        _print_diagnostics(diags)
-        raise typer.Exit(EXIT_USAGE)
-    from twolevel.verdict.judge import judge_run
-
-    verdict, more = judge_run(summary.run_dir, scenario)
-    _print_diagnostics(diags + more)
-    console = _console()
-    console.print(_table(f"{scenario} → {summary.run_dir}", _summary_rows(summary)))
-    if verdict is not None:
-        console.print(_criteria_table(verdict))
-    console.print(f"trace: {Path(summary.run_dir) / 'trace.csv'}   report: twolevel report {summary.run_dir}", markup=False)
-    if summary.status is not RunStatus.COMPLETE or verdict is None:
-        raise typer.Exit(EXIT_USAGE)
-    raise typer.Exit(EXIT_OK if verdict.passed else EXIT_FAIL)
+            return simulate_scenario(scenario, run_dir, monitor=not no_monitor, safety=not no_safety,
+                                     controller=ctrl, seed=seed, duration=duration, progress=on_step)
+    return simulate_scenario(scenario, run_dir, monitor=not no_monitor, safety=not no_safety,
+                             controller=ctrl, seed=seed, duration=duration)
 
 
 def _criteria_table(verdict):  # noqa: ANN001, ANN202 - Verdict and rich are imported lazily
@@ -749,9 +767,12 @@ def main() -> None:
         app()
     except SystemExit:
         raise
-    except KeyboardInterrupt:
-        sys.stderr.write("interrupted\n")
-        sys.exit(130)
+    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM / SIGHUP (twolevel.interruption)
+        from twolevel import interruption
+
+        signum = getattr(exc, "signum", None)
+        sys.stderr.write(f"twolevel: {interruption.describe(signum)}\n")
+        sys.exit(interruption.exit_code(signum))
     except Exception as exc:  # pragma: no cover - the last line of defence
         sys.stderr.write(f"twolevel: internal error: {type(exc).__name__}: {exc}\n")
         sys.stderr.write("This is a bug in twolevel; please report it with the command you ran.\n")

@@ -11,23 +11,23 @@ Bad input comes back as diagnostics (YML4xx, STL2xx, MIL5xx), never as an except
 
 from __future__ import annotations
 
-import csv
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
 from twolevel.control.codes import MIL511, MIL512, MIL513, MIL514, MIL516
+from twolevel.control.high_level.conflicts import explain_infeasibility
 from twolevel.control.high_level.controller import HighLevelController
-from twolevel.control.high_level.linearisation import StepData
 from twolevel.control.high_level.settings import SOLVERS, MPCSettings
 from twolevel.control.planner import PlanStatus
 from twolevel.diagnostics import Diagnostic, Span
-from twolevel.milp.highs import solve_highs, write_model
+from twolevel.milp.highs import write_model
 from twolevel.milp.l1_surrogate import l1_surrogate
-from twolevel.milp.solution import Status
+from twolevel.monitor.tracefile import read_trace
+from twolevel.sim.summary import jsonable
 from twolevel.world.loader import load_scenario
 from twolevel.world.signals import signals_along
 from twolevel.world.traffic import EgoBox
@@ -60,22 +60,32 @@ class PlanReport:
     emitted: str | None = None
     extra: dict[str, Any] = field(default_factory=dict)
 
+    @property
+    def certificate(self) -> str:
+        """What the solver proved: ``optimal`` (a plan, optimal within the gap), ``infeasible``
+        (no plan satisfies the rules: what is shown is the fallback, which claims nothing) or
+        ``none``."""
+        if not self.certified:
+            return "none"
+        return "optimal" if self.status.ok else "infeasible"
+
     def to_json(self) -> dict[str, Any]:
-        """The JSON object of ``--format json`` (non-finite numbers: null; a robustness of ±inf —
-        a rule trivially true or false — as the strings "inf"/"-inf")."""
+        """The JSON object of ``--format json``, by the documented convention: a robustness of
+        ±inf (a rule trivially true or false) is the string "inf"/"-inf"; any other number that is
+        not finite (a fallback's objective, a NaN time) is null."""
         def num(v: float) -> float | None:
             return float(v) if math.isfinite(v) else None
 
         out: dict[str, Any] = {
             "status": self.status.value,
+            "certified": self.certificate,
             "objective": num(self.objective),
-            "solve_ms": {k: round(v, 4) for k, v in self.solve_ms.items()},
+            "solve_ms": {k: None if num(v) is None else round(v, 4) for k, v in self.solve_ms.items()},
             "binaries": self.binaries,
             "rows": self.rows,
             "columns": self.columns,
             "plan": [[num(v) for v in row] for row in self.plan],
-            "rules": [{"name": n, "robustness": num(r) if math.isfinite(r) or math.isnan(r) else
-                       ("inf" if r > 0 else "-inf")} for n, r in self.rules],
+            "rules": [{"name": n, "robustness": jsonable(float(r))} for n, r in self.rules],
         }
         if self.conflicts:
             out["conflicts"] = list(self.conflicts)
@@ -89,58 +99,40 @@ class PlanReport:
         return head, [tuple(f"{v:.3f}" for v in row) for row in self.plan]
 
 
+_STATE_COLUMNS = ("t", "x", "y", "psi", "v")
+_TRACE_COLUMNS = ("x", "y", "psi", "v", "delta", "gamma", "a")
+
+
 def _read_trace(path: str, at: float) -> tuple[dict[str, np.ndarray] | None, list[Diagnostic]]:
+    """The recorded columns up to the sample at ``at`` [s] (``t`` and the ego's), read by the
+    one trace reader (:func:`twolevel.monitor.tracefile.read_trace`); its first error becomes a
+    MIL516 at the same place."""
     span = Span(path)
-    p = Path(path)
-    if not p.is_file():
-        return None, [MIL516(f"trace file not found: {path}", span, hint="give RUN_DIR/trace.csv of a simulate run")]
-    try:
-        with open(p, newline="", encoding="utf-8") as fh:
-            rows = list(csv.DictReader(fh))
-    except (OSError, UnicodeDecodeError, csv.Error) as e:
-        return None, [MIL516(f"cannot read the trace: {e}", span)]
-    need = ("t", "x", "y", "psi", "v")
-    if not rows or any(k not in rows[0] for k in need):
-        return None, [MIL516(f"the trace needs the columns {', '.join(need)}", span)]
-    try:
-        cols = {k: np.array([float(r[k]) for r in rows]) for k in rows[0] if k in
-                ("t", "x", "y", "psi", "v", "delta", "gamma", "a")}
-    except (TypeError, ValueError) as e:
-        return None, [MIL516(f"a trace cell is not a number: {e}", span)]
-    t = cols["t"]
     if not math.isfinite(at):
         return None, [MIL513(f"--at must be a finite time in seconds, got {at}", span)]
+    trace, diags = read_trace(path)
+    bad = next((d for d in diags if d.is_error), None)
+    if trace is None or bad is not None:
+        why = bad.message if bad is not None else "unreadable"
+        return None, [MIL516(f"cannot read the trace: {why}", bad.span if bad is not None else span,
+                             hint=(bad.hint if bad is not None and bad.hint else "give RUN_DIR/trace.csv of a simulate run"))]
+    missing = [k for k in _STATE_COLUMNS[1:] if k not in trace.columns or k in trace.unusable]
+    if missing:
+        return None, [MIL516(f"the trace needs numeric columns {', '.join(_STATE_COLUMNS)} (missing: "
+                             f"{', '.join(missing)})", span)]
+    t = trace.t
     i = int(np.argmin(np.abs(t - at)))
-    dt = float(np.median(np.diff(t))) if t.size > 1 else 0.1
-    if abs(t[i] - at) > dt / 2 + 1e-9:
+    if abs(t[i] - at) > trace.dt / 2 + 1e-9:
         return None, [MIL513(f"time {at} s is not in the trace ({t[0]:.2f} … {t[-1]:.2f} s)", span,
                              hint="pick --at within the recorded run")]
-    return {k: v[: i + 1] for k, v in cols.items()}, []
-
-
-def explain_infeasibility(ctrl: HighLevelController, step: StepData, past: Mapping[str, np.ndarray], P: int
-                          ) -> tuple[str, ...]:
-    """The rules that conflict: the smallest set (single rules first, then pairs) whose removal
-    makes the step feasible; empty when even no rules is infeasible or nothing single/pairwise helps."""
-    names = [r.name for r in ctrl.rules]
-
-    def feasible(drop: frozenset[str]) -> bool:
-        asm = ctrl.build(step, past, P, drop=drop)
-        if asm.encoding.infeasible:
-            return False
-        sol = solve_highs(asm.model, time_limit=5.0)  # feasibility: the linear part is enough
-        return sol.status in (Status.OPTIMAL,) or (sol.status is Status.TIME_LIMIT and sol.x is not None)
-
-    if not feasible(frozenset(names)):
-        return ()
-    single = tuple(n for n in names if feasible(frozenset({n})))
-    if single:
-        return single
-    for i, a in enumerate(names):
-        for b in names[i + 1:]:
-            if feasible(frozenset({a, b})):
-                return (a, b)
-    return ()
+    cols = {"t": t[: i + 1]}
+    cols.update({k: np.asarray(trace.columns[k][: i + 1], dtype=float) for k in _TRACE_COLUMNS
+                 if k in trace.columns and k not in trace.unusable})
+    for k in _STATE_COLUMNS[1:]:
+        j = np.flatnonzero(~np.isfinite(cols[k]))
+        if j.size:
+            return None, [MIL516(f"the trace's {k} is {cols[k][j[0]]} at t = {t[j[0]]:g} s: the state must be finite", span)]
+    return cols, []
 
 
 def plan_scenario(

@@ -62,7 +62,6 @@ the machine's speed; the default mode search is deterministic in practice).
 
 from __future__ import annotations
 
-import json
 import math
 import time
 import traceback
@@ -73,26 +72,31 @@ from typing import Callable
 
 import numpy as np
 
+from twolevel.control.high_level.conflicts import conflicting_rules
+from twolevel.control.high_level.controller import HighLevelController
 from twolevel.control.low_level.controller import LowLevelController
 from twolevel.control.low_level.guard import OFF, Check, Outcome
 from twolevel.control.low_level.settings import LowLevelSettings
 from twolevel.control.low_level.rules import RuleCheck, rule_checks
 from twolevel.control.planner import EgoState, Planner, PlanResult, PlanStatus, Snapshot
 from twolevel.control.registry import CONTROLLERS, planner_named
+from twolevel import interruption
 from twolevel.diagnostics import Diagnostic, Span
+from twolevel.files import DirectoryBusy
 from twolevel.models import fourwheel as fw
 from twolevel.models.actuation import gamma_from_accel
 from twolevel.models.params import VehicleParams
 from twolevel.models.rollout import rollout
 from twolevel.safety.verify import Verdict, context, time_to_react
-from twolevel.sim.codes import SIM610, SIM611, SIM612, SIM613, SIM614, SIM615, SIM616
+from twolevel.sim.codes import SIM610, SIM611, SIM612, SIM613, SIM614, SIM615, SIM616, SIM617, SIM618
 from twolevel.sim.collisions import CollisionLog
 from twolevel.sim.frames import FrameWriter
 from twolevel.sim.history import History
 from twolevel.sim.provenance import run_metadata
 from twolevel.sim.robustness import RuleColumns
 from twolevel.sim.summary import Collision, RunSummary, StepDecision, StepInfo, summarise
-from twolevel.sim.trace import BASE_COLUMNS, RUN_FILE, RunStatus, TraceWriter, write_json_atomic
+from twolevel.sim.trace import BASE_COLUMNS, RunDirectory, RunStatus, TraceWriter
+from twolevel.sim.unsatisfiable import UnsatisfiableLog
 from twolevel.stl.typecheck import RuleSet
 from twolevel.world import traffic as tr
 from twolevel.world.loader import Scenario, load_scenario
@@ -156,21 +160,31 @@ def simulate_scenario(
         return None, [SIM611(f"the duration must be a positive number of seconds, got {duration}", where)]
     if seed is not None and seed < 0:
         return None, [SIM611(f"the seed must be ≥ 0, got {seed}", where)]
-    scn, diags = load_scenario(scenario_path)
-    if scn is None or any(d.is_error for d in diags):
-        return None, diags
-    run = scn.spec.run.model_copy(update={k: v for k, v in (("seed", seed), ("duration", duration)) if v is not None})
-    scn = replace(scn, spec=scn.spec.model_copy(update={"run": run}))
-    world = build_world(scn)
-    loop, more = ClosedLoop.create(world, scn, monitor=monitor, controller=controller, safety=safety,
-                                   ttr_every=ttr_every)
-    diags += more
-    if loop is None:
-        return None, diags
-    try:
-        Path(out_dir).mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        return None, diags + [SIM615(f"cannot create the run directory '{out_dir}': {exc}", where)]
+    diags: list[Diagnostic] = []
+    try:  # start-up: an interruption here is reported (SIM612); nothing is written yet
+        interruption.checkpoint()
+        scn, diags = load_scenario(scenario_path)
+        if scn is None or any(d.is_error for d in diags):
+            return None, diags
+        run = scn.spec.run.model_copy(update={k: v for k, v in (("seed", seed), ("duration", duration)) if v is not None})
+        dt = scn.spec.controller.dt
+        if int(round(run.duration / dt)) < 1:
+            return None, diags + [SIM611(f"the duration {run.duration:g} s is shorter than one control step "
+                                         f"(dt = {dt:g} s): nothing would run", where,
+                                         hint=f"give --duration {dt:g} or more")]
+        scn = replace(scn, spec=scn.spec.model_copy(update={"run": run}))
+        interruption.checkpoint()
+        world = build_world(scn)
+        interruption.checkpoint()
+        loop, more = ClosedLoop.create(world, scn, monitor=monitor, controller=controller, safety=safety,
+                                       ttr_every=ttr_every)
+        diags += more
+        if loop is None:
+            return None, diags
+        interruption.checkpoint()
+    except KeyboardInterrupt as exc:
+        return None, diags + [SIM612(f"{interruption.describe(getattr(exc, 'signum', None))} during start-up, before "
+                                     f"the run directory was written", where, hint=f"nothing was written to {out_dir}")]
     return loop.run(out_dir, progress, frames, diags)
 
 
@@ -322,6 +336,8 @@ class ClosedLoop:
         self.columns = RuleColumns(self.rules, self.consts, world.settings.dt, SIGNALS)
         self.goal_reached_t: float | None = None
         self.t_wall0 = time.perf_counter()
+        self.unsatisfiable = UnsatisfiableLog()
+        self._carry: object = None  # the MILP planner's carry before the step's solve (to explain it)
 
     @classmethod
     def create(cls, world: World, scn: Scenario, *, monitor: bool, controller: str, safety: bool = True,
@@ -341,40 +357,48 @@ class ClosedLoop:
     # ------------------------------------------------------------------------------ the run
     def run(self, out_dir: str, progress: Callable[[StepInfo], None] | None, frames: bool,
             diags: list[Diagnostic]) -> tuple[RunSummary | None, list[Diagnostic]]:
-        """Every step into ``out_dir``; the summary and the diagnostics (see :func:`simulate_scenario`)."""
+        """Every step into ``out_dir``; the summary and the diagnostics (see :func:`simulate_scenario`).
+        The directory is held (:class:`~twolevel.sim.trace.RunDirectory`) before anything else is
+        done, so whatever happens next — a crash at step 0, an interruption while compiled
+        functions are built — ``run.json`` records it."""
+        where = Span.whole_file(self.scn.path)
+        try:
+            directory = RunDirectory(out_dir, {"scenario": str(self.scn.path)})
+        except DirectoryBusy as exc:
+            held = f"process {exc.holder}" if exc.holder else "another run"
+            return None, diags + [SIM617(f"the run directory {out_dir} is being written by {held}: this run is "
+                                         "refused", where, hint="choose another --out, or wait for that run to end")]
+        except OSError as exc:
+            return None, diags + [SIM615(f"cannot write the run directory '{out_dir}': {exc}", where,
+                                         hint="choose another --out, or remove what is in the way")]
+        with directory:
+            return self._run_in(directory, progress, frames, diags, where)
+
+    def _run_in(self, directory: RunDirectory, progress: Callable[[StepInfo], None] | None, frames: bool,
+                diags: list[Diagnostic], where: Span) -> tuple[RunSummary, list[Diagnostic]]:
+        out_dir = str(directory.path)
         rule_names = [r.name for r in self.rules]
         columns = list(BASE_COLUMNS) + list(SIGNAL_COLUMNS) + list(EXTRA_COLUMNS) + [f"rob_{n}" for n in rule_names]
         status, error, unwritable = RunStatus.COMPLETE, "", False
         self.t_wall0 = time.perf_counter()
-        fw_writer = None
+        writer: TraceWriter | None = None
+        fw_writer: FrameWriter | None = None
         try:
-            meta = run_metadata(self.world, self.scn, monitor=self.monitor, controller=self.controller,
-                                timing_columns=TIMING_COLUMNS, safety=self.safety)
-            with TraceWriter(out_dir, columns, meta) as writer:
-                if frames:
-                    fw_writer = FrameWriter(out_dir, self.world)
-                try:
-                    self._steps(progress, writer, fw_writer)
-                except BaseException:
-                    self.columns.finish(writer)
-                    writer.meta["summary"] = self._summary(out_dir, RunStatus.INTERRUPTED).to_json()
-                    raise
-                self.columns.finish(writer)
-                writer.meta["summary"] = self._summary(out_dir, RunStatus.COMPLETE).to_json()
-        except KeyboardInterrupt:
-            status = RunStatus.INTERRUPTED
+            directory.meta.update(run_metadata(self.world, self.scn, monitor=self.monitor, controller=self.controller,
+                                               timing_columns=TIMING_COLUMNS, safety=self.safety))
+            writer = TraceWriter(directory, columns)
+            if frames:
+                fw_writer = FrameWriter(out_dir, self.world)
+            self._steps(progress, writer, fw_writer)
+        except KeyboardInterrupt as exc:
+            status, error = RunStatus.INTERRUPTED, interruption.describe(getattr(exc, "signum", None))
         except OSError as exc:  # the disk is full, or the run directory went away
             status, error, unwritable = RunStatus.CRASHED, f"{type(exc).__name__}: {exc}", True
         except Exception as exc:  # an internal error: keep the run, say what happened
             status, error = RunStatus.CRASHED, f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}"
-        finally:
-            if fw_writer is not None:
-                try:
-                    fw_writer.close()
-                except OSError as exc:
-                    status, error, unwritable = RunStatus.CRASHED, error or f"{type(exc).__name__}: {exc}", True
-        summary = self._summary(out_dir, status)
-        where = Span.whole_file(self.scn.path)
+        with interruption.shielded():  # what was completed is written whatever arrives now
+            status, error, unwritable = self._finish(directory, writer, fw_writer, status, error, unwritable)
+            summary = self._summary(out_dir, status)
         if self.initial is not None and not self.initial.verified:
             why = "; ".join(str(r) for r in self.initial.refutations) or "no fail-safe"
             diags.append(SIM616(f"the initial state has no verified fail-safe ({why})", where,
@@ -384,23 +408,54 @@ class ClosedLoop:
             diags.append(SIM615(f"cannot write the run directory {out_dir}: {error}", where,
                                 hint="free disk space or choose another --out; the steps written so far are kept"))
         elif status is RunStatus.INTERRUPTED:
-            diags.append(SIM612(f"interrupted after {summary.steps} steps ({summary.duration:g} s)", where,
+            diags.append(SIM612(f"{error} after {summary.steps} steps ({summary.duration:g} s)", where,
                                 hint=f"the completed steps are in {out_dir}"))
         elif status is RunStatus.CRASHED:
             diags.append(SIM613(f"the run stopped after {summary.steps} steps: {error.splitlines()[0]}", where,
                                 hint=f"the completed steps are in {out_dir}; run.json has the traceback"))
-            try:
-                meta = json.loads((Path(out_dir) / RUN_FILE).read_text(encoding="utf-8"))
-                meta["traceback"] = error
-                meta["summary"] = summary.to_json()
-                write_json_atomic(Path(out_dir) / RUN_FILE, meta)
-            except (OSError, ValueError) as exc:
-                diags.append(SIM615(f"cannot record the traceback in {RUN_FILE}: {exc}", where))
         for c in summary.collisions:
             fault = "the ego's fault" if c.at_fault else "not the ego's fault"
             diags.append(SIM614(f"collision with '{c.other}' at t = {c.t:.1f} s, ({c.x:.1f}, {c.y:.1f}) m, "
                                 f"overlap {-c.gap:.2f} m: {fault} ({c.reason})", where))
+        diags += self.infeasibility_diagnostics(where)
         return summary, diags
+
+    def _finish(self, directory: RunDirectory, writer: TraceWriter | None, fw_writer: FrameWriter | None,
+                status: RunStatus, error: str, unwritable: bool) -> tuple[RunStatus, str, bool]:
+        """Complete the rows the online monitor still holds, close the trace and the frames and
+        record how the run ended in ``run.json`` (with the summary; a crash's traceback); a
+        failure to write turns the status into ``crashed`` (the directory is unwritable)."""
+        def failed(exc: OSError) -> None:
+            nonlocal status, error, unwritable
+            status, unwritable = RunStatus.CRASHED, True
+            error = error or f"{type(exc).__name__}: {exc}"
+
+        if writer is not None and not unwritable:
+            try:
+                self.columns.finish(writer)
+            except OSError as exc:
+                failed(exc)
+            except Exception as exc:  # an interruption left the monitor mid-step: its last rows are lost
+                directory.meta["unfinished"] = f"the last rows' robustness could not be completed: {exc!r}"
+        if fw_writer is not None:
+            try:
+                fw_writer.close()
+            except OSError as exc:
+                failed(exc)
+        meta = directory.meta
+        if status is not RunStatus.COMPLETE:
+            meta["error"] = error.splitlines()[0] if error else "no reason recorded"
+            if "\n" in error:
+                meta["traceback"] = error
+        meta["summary"] = self._summary(str(directory.path), status).to_json()
+        try:
+            if writer is not None:
+                writer.close(status, meta["summary"])
+            else:
+                directory.record(status)
+        except OSError as exc:
+            failed(exc)
+        return status, error, unwritable
 
     def _summary(self, out_dir: str, status: RunStatus) -> RunSummary:
         st = self.stats
@@ -417,6 +472,7 @@ class ClosedLoop:
             closest=self.collisions.closest(5), goal_reached_t=self.goal_reached_t, speeds=st.speeds,
             verification=st.outcomes, ttr=st.ttr, safety=self.safety, cpu_ms=st.cpu_ms,
             safe_start=None if self.initial is None else self.initial.verified,
+            unsatisfiable=self.unsatisfiable.all(),
         )
 
     def _steps(self, progress: Callable[[StepInfo], None] | None, writer: TraceWriter,
@@ -430,10 +486,13 @@ class ClosedLoop:
         keep = max([r.past for r in self.rules] + [self.planner.history_depth])
         out = Recorders(writer, frames, History(SIGNALS, keep))
         self.low.warm_up(x)
+        interruption.checkpoint()
         rollout(x, np.zeros((1, 1, 2)), dt, p)  # compile the plant step before timing anything
+        interruption.checkpoint()
         if self.safety:
             self.initial = self.low.start(x, state.traffic, 0.0, state.s_hint)
             writer.meta["safety"] = {"initial": _verdict_json(self.initial)}
+            interruption.checkpoint()
         recent: deque[float] = deque(maxlen=20)
         self.goal_reached_t = None
         stops_at_goal = bool(w.route.v_des.size and w.route.v_des[-1] <= 1e-9)
@@ -450,6 +509,8 @@ class ClosedLoop:
             state, plant_ms = self.advance(sensed, applied)
             times = StepTimes((c2 - c1) * 1e3, (c3 - c2) * 1e3, (c3 - c0) * 1e3, plant_ms, (cpu3 - cpu0) * 1e3)
             self.record(sensed, plan, applied, times, out, ttr)
+            self.unsatisfiable.observe(sensed.t, not plan.ok and PlanStatus.INFEASIBLE in (plan.cause, plan.status),
+                                       applied.decision, sensed.v, lambda: self.conflicts(sensed))
             recent.append(times.step)
             # the run ends when the ego stands still at the goal (GOAL_ZONE before it or past it)
             if stops_at_goal and sensed.s0 >= goal_s - GOAL_ZONE and abs(sensed.v) <= s.stop_speed:
@@ -462,6 +523,7 @@ class ClosedLoop:
                                   (k + 1) * dt / wall if wall > 0 else math.inf))
             if self.goal_reached_t is not None:
                 break
+            interruption.checkpoint()  # a signal received during the step stops the run here
 
     # ------------------------------------------------------------------------------ one step
     def sense(self, k: int, state: LoopState, history: History) -> Sensed:
@@ -487,6 +549,7 @@ class ClosedLoop:
         """The planner's answer and the controls u* (H, 2) [δ rad, a m/s²] to check: the plan's,
         or full braking when they are unusable."""
         H = self.world.settings.H
+        self._carry = getattr(self.planner, "carry", None)
         plan = self.planner.solve(sensed.ego, sensed.t, Snapshot(sensed.traffic, sensed.memory_after.stops),
                                   sensed.past)
         u_star = np.asarray(plan.controls, dtype=float)
@@ -514,6 +577,24 @@ class ClosedLoop:
         if decision is StepDecision.MPC and plan.status is PlanStatus.FALLBACK:
             decision = StepDecision.FALLBACK
         return Applied(control, float(accel), decision, tried, why, safety, verify_ms, intended)
+
+    def conflicts(self, sensed: Sensed) -> tuple[str, ...] | None:
+        """The rules that made this step's planning problem infeasible (see
+        :mod:`twolevel.sim.unsatisfiable`); None when the planner cannot say."""
+        if not isinstance(self.planner, HighLevelController) or self._carry is None:
+            return None
+        return conflicting_rules(self.planner, sensed.ego, sensed.t, Snapshot(sensed.traffic, sensed.memory_after.stops),
+                                 sensed.past, self._carry)
+
+    def infeasibility_diagnostics(self, where: Span, most: int = 10) -> list[Diagnostic]:
+        """One SIM618 per episode in which no plan satisfied every rule (the first ``most``)."""
+        eps = self.unsatisfiable.all()
+        out = [SIM618(ep.describe(), where, hint="the rules named cannot all hold there: change the scenario or the "
+                                                 "rules (twolevel plan --trace RUN_DIR/trace.csv --at T re-solves a step)")
+               for ep in eps[:most]]
+        if len(eps) > most:
+            out.append(SIM618(f"... and {len(eps) - most} more such episodes (run.json lists them all)", where))
+        return out
 
     def criticality(self, sensed: Sensed, applied: Applied) -> float:
         """The time to react [s] every ``ttr_every`` steps (NaN in between; see the module

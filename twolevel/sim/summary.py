@@ -15,7 +15,8 @@ import numpy as np
 from twolevel.milp.solution import ValueEnum
 from twolevel.sim.trace import RunStatus
 
-__all__ = ["StepDecision", "LEVELS", "LEVEL", "StepInfo", "Collision", "Closest", "RuleViolations", "RunSummary",
+__all__ = ["StepDecision", "LEVELS", "LEVEL", "StepInfo", "Collision", "Closest", "Unsatisfiable", "RuleViolations",
+           "RunSummary",
            "summarise", "jsonable", "intervals", "HARD_BRAKING"]
 
 class StepDecision(ValueEnum):
@@ -102,6 +103,33 @@ class Closest:
 
 
 @dataclass(frozen=True)
+class Unsatisfiable:
+    """An episode of steps in which no plan satisfied every rule (the high level fell back):
+    from ``t_start`` to ``t_end`` [s] (both steps included), the ``rules`` that conflicted at its
+    first step (empty with ``explained`` False: the planner cannot say, or no single rule or pair
+    explains it), what the car did instead (``decisions``: steps per decision) and its speed
+    [m/s] at the first and the last step."""
+
+    t_start: float
+    t_end: float
+    steps: int
+    rules: tuple[str, ...]
+    explained: bool
+    decisions: Mapping[str, int]
+    v_start: float
+    v_end: float
+
+    def describe(self) -> str:
+        """One sentence: when, which rules, what the car did."""
+        why = (f"rules {', '.join(self.rules)} conflict" if len(self.rules) > 1 else f"rule {self.rules[0]} cannot hold"
+               ) if self.rules else "no single rule or pair of rules explains it"
+        did = ", ".join(f"{d} {n}" for d, n in sorted(self.decisions.items(), key=lambda kv: (-kv[1], kv[0])))
+        return (f"from t = {self.t_start:.1f} s to {self.t_end:.1f} s ({self.steps} step{'s' if self.steps != 1 else ''}) no plan satisfied every rule "
+                f"({why}); the high level fell back on its previous plan or braking, and the car applied: {did}; "
+                f"speed {self.v_start:.1f} → {self.v_end:.1f} m/s")
+
+
+@dataclass(frozen=True)
 class RuleViolations:
     """Steps at which a rule's robustness (on the executed trace) was negative: how many, the
     first time [s] and the worst robustness."""
@@ -128,7 +156,8 @@ class RunSummary:
     ``verification``: steps per outcome (verified, failsafe, unverified, off), ``at_fault``: collisions that were the ego's
     fault, ``ttr_min_s`` [s]: the smallest time to react recorded. Braking: ``decel_peak``
     [m/s²]: the largest deceleration over one step (from the speeds), ``hard_braking_share``:
-    the share of steps decelerating harder than :data:`HARD_BRAKING`."""
+    the share of steps decelerating harder than :data:`HARD_BRAKING`. ``unsatisfiable``: the
+    episodes in which no plan satisfied every rule (:class:`Unsatisfiable`)."""
 
     scenario: str
     run_dir: str
@@ -171,6 +200,7 @@ class RunSummary:
     ttr_min_s: float = math.nan
     decel_peak: float = math.nan
     hard_braking_share: float = math.nan
+    unsatisfiable: tuple[Unsatisfiable, ...] = ()
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready dict (infinities as the strings "inf"/"-inf", NaN as null)."""
@@ -221,6 +251,7 @@ def summarise(
     closest: Sequence[Closest] = (), budget_ms: float = 100.0, goal_reached_t: float | None = None,
     speeds: Sequence[float] = (), verification: Sequence[str] = (), safety: bool = False,
     safe_start: bool | None = None, ttr: Sequence[float] = (), cpu_ms: Sequence[float] = (),
+    unsatisfiable: Sequence[Unsatisfiable] = (),
 ) -> RunSummary:
     """The summary of the steps recorded so far (``speeds`` [m/s] per step, ``verification``
     outcome per step, ``ttr`` [s] the time to react where recorded, NaN elsewhere)."""
@@ -271,4 +302,5 @@ def summarise(
         ttr_min_s=float(ttr_a.min()) if ttr_a.size else math.nan,
         decel_peak=float(max(decel.max(), 0.0)) if decel.size else math.nan,
         hard_braking_share=float(np.mean(decel > HARD_BRAKING)) if decel.size else math.nan,
+        unsatisfiable=tuple(unsatisfiable),
     )
