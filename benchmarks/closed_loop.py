@@ -46,10 +46,9 @@ BEFORE: dict[tuple[str, str], tuple[str, float]] = {
 
 
 def _machine() -> str:
-    try:
-        cpus = len(os.sched_getaffinity(0))
-    except AttributeError:
-        cpus = os.cpu_count() or 1
+    from twolevel.sim.provenance import cpus as usable
+
+    cpus = usable()
     model = platform.processor() or platform.machine()
     try:
         for line in open("/proc/cpuinfo", encoding="utf-8"):

@@ -19,7 +19,7 @@ import multiprocessing
 import os
 from typing import Any, Callable
 
-__all__ = ["Executor", "make_executor", "pin_threads", "worker_threads", "usable_cores", "THREAD_VARIABLES", "ExecutorError"]
+__all__ = ["Executor", "make_executor", "pin_threads", "worker_threads", "THREAD_VARIABLES", "ExecutorError"]
 
 #: Environment variables that size the BLAS and OpenMP thread pools.
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS",
@@ -80,16 +80,10 @@ def make_executor(scheduler: str | None = None, workers: int | None = None) -> c
         return _DaskExecutor(scheduler)
     if workers is not None and workers < 1:
         raise ExecutorError(f"--jobs must be at least 1, got {workers}")
-    n = workers or usable_cores()
+    from twolevel.sim.provenance import cpus  # the one count of usable cores
+
+    n = workers or cpus()
     return cf.ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn"), initializer=pin_threads)
-
-
-def usable_cores() -> int:
-    """Cores this process may run on."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        return os.cpu_count() or 1
 
 
 def worker_threads() -> dict[str, str | None]:
