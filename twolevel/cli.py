@@ -337,6 +337,8 @@ def simulate(
     with interruption.deferred():  # a signal stops the run where stopping is safe (run.json records it)
         summary, diags = _simulate(scenario, out, no_monitor, no_safety, controller, nmpc_model, seed, duration,
                                    progress)
+    if any(d.code == "SIM612" for d in diags):
+        interruption.clear()  # the run stopped for it and says so
     interruption.checkpoint()  # a signal that came as the run ended is not swallowed
     if summary is None:
         _print_diagnostics(diags)
@@ -763,13 +765,17 @@ def falsify(
 
 def main() -> None:
     """Console-script entry point: never let a Python traceback reach the user."""
+    from twolevel import interruption
+
     try:
         app()
-    except SystemExit:
+    except SystemExit as exc:
+        if exc.code == 130:  # typer's silent exit for a KeyboardInterrupt: say which signal it was
+            signum = interruption.received()
+            sys.stderr.write(f"twolevel: {interruption.describe(signum)}\n")
+            sys.exit(interruption.exit_code(signum))
         raise
     except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM / SIGHUP (twolevel.interruption)
-        from twolevel import interruption
-
         signum = getattr(exc, "signum", None)
         sys.stderr.write(f"twolevel: {interruption.describe(signum)}\n")
         sys.exit(interruption.exit_code(signum))
