@@ -85,3 +85,39 @@ rules: [{tmp_path / 'fast.stl'}, {tmp_path / 'slow.stl'}, {REPO / 'rules/speed_l
     assert rep is not None and rep.status == "fallback"
     assert set(rep.conflicts) == {"go_fast", "stay_slow"}
     assert any(d.code == "MIL511" and "go_fast" in d.message for d in diags)
+
+
+def _drive(tmp_path, end: str = "\n", v: str = "13") -> str:
+    rows = ["t,x,y,psi,v,delta,gamma"] + [f"{0.1 * k:.1f},{20 + 1.3 * k:.3f},0,0,{v if k == 15 else 13},0,0"
+                                          for k in range(31)]
+    path = tmp_path / f"trace{len(end)}{v}.csv"
+    path.write_bytes((end.join(rows) + end).encode())
+    return str(path)
+
+
+def test_plan_reads_traces_with_the_monitors_reader(tmp_path) -> None:
+    """Line endings and quoting the monitor accepts, plan accepts alike; what it refuses is a
+    diagnostic at its place, and a non-finite state is refused."""
+    plans = [plan_scenario(str(REPO / "scenarios/scalability.yaml"), at=2.0, trace=_drive(tmp_path, end))[0]
+             for end in ("\n", "\r\n", "\r")]
+    assert all(p is not None for p in plans) and plans[0].plan == plans[1].plan == plans[2].plan
+    rep, diags = plan_scenario(str(REPO / "scenarios/scalability.yaml"), at=2.0, trace=_drive(tmp_path, v="inf"))
+    assert rep is None and [d.code for d in diags] == ["MIL516"] and "v is inf" in diags[0].message
+    rep, diags = plan_scenario(str(REPO / "scenarios/scalability.yaml"), at=2.0, trace=_drive(tmp_path, v="fast"))
+    assert rep is None and [d.code for d in diags] == ["MIL516"] and diags[0].span.line > 1
+
+
+def test_plan_json_follows_the_non_finite_convention() -> None:
+    import json
+    import math
+
+    from twolevel.control.planner import PlanStatus
+    from twolevel.pipeline.planning import PlanReport
+
+    rep = PlanReport(PlanStatus.FALLBACK, math.nan, {"total": math.inf, "solve": 1.23456}, 0, 0, 0,
+                     ((0.0, 1.0, math.nan, 0.0, math.inf, 0.0, 0.0),), (("a", math.inf), ("b", -math.inf),
+                                                                         ("c", math.nan), ("d", 0.5)))
+    out = json.loads(json.dumps(rep.to_json(), allow_nan=False))
+    assert out["objective"] is None and out["solve_ms"] == {"total": None, "solve": 1.2346}
+    assert out["plan"] == [[0.0, 1.0, None, 0.0, None, 0.0, 0.0]] and out["certified"] == "none"
+    assert [r["robustness"] for r in out["rules"]] == ["inf", "-inf", None, 0.5]

@@ -116,7 +116,10 @@ def _read_trace(path: str, at: float) -> tuple[dict[str, np.ndarray] | None, lis
         why = bad.message if bad is not None else "unreadable"
         return None, [MIL516(f"cannot read the trace: {why}", bad.span if bad is not None else span,
                              hint=(bad.hint if bad is not None and bad.hint else "give RUN_DIR/trace.csv of a simulate run"))]
-    missing = [k for k in _STATE_COLUMNS[1:] if k not in trace.columns or k in trace.unusable]
+    text = next((trace.unusable[k] for k in _STATE_COLUMNS[1:] if k in trace.unusable), None)
+    if text is not None:  # a cell that is not a number, where the reader found it
+        return None, [MIL516(f"cannot read the trace: {text.message}", text.span, hint=text.hint)]
+    missing = [k for k in _STATE_COLUMNS[1:] if k not in trace.columns]
     if missing:
         return None, [MIL516(f"the trace needs numeric columns {', '.join(_STATE_COLUMNS)} (missing: "
                              f"{', '.join(missing)})", span)]
