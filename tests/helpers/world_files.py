@@ -52,3 +52,17 @@ def write(tmp: Path, name: str, text: str) -> Path:
     p = tmp / name
     p.write_text(textwrap.dedent(text))
     return p
+
+
+def write_conflicting(tmp: Path, repo: Path) -> Path:
+    """A scenario on the shipped highway whose rules contradict each other from the start (faster
+    than 12.2 m/s within 0.5 s, never faster than 12 m/s), with the shipped speed limit beside
+    them: no plan satisfies every rule."""
+    (tmp / "fast.stl").write_text("input float v\ngo_fast = always[0.5:1] (v >= 12.2);\n")
+    (tmp / "slow.stl").write_text("input float v\nstay_slow = always[0:1] (v <= 12);\n")
+    return write(tmp, "s.yaml", f"""kind: scenario
+map: {repo / 'maps/highway.yaml'}
+ego: {{start: {{lane: middle, s: 20}}, speed: 11.0}}
+route: {{start: {{lane: middle, s: 20}}, goal: {{lane: middle, s: 900}}}}
+rules: [{tmp / 'fast.stl'}, {tmp / 'slow.stl'}, {repo / 'rules/speed_limit.stl'}]
+""")

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from helpers.world_files import write_conflicting
 from twolevel.pipeline.planning import plan_scenario
 
 REPO = Path(__file__).resolve().parents[2]
@@ -73,14 +74,7 @@ def test_plan_at_a_recorded_time(tmp_path) -> None:
 
 
 def test_infeasible_plans_name_the_conflicting_rules(tmp_path) -> None:
-    (tmp_path / "fast.stl").write_text("input float v\ngo_fast = always[0.5:1] (v >= 12.2);\n")
-    (tmp_path / "slow.stl").write_text("input float v\nstay_slow = always[0:1] (v <= 12);\n")
-    (tmp_path / "s.yaml").write_text(f"""kind: scenario
-map: {REPO / 'maps/highway.yaml'}
-ego: {{start: {{lane: middle, s: 20}}, speed: 11.0}}
-route: {{start: {{lane: middle, s: 20}}, goal: {{lane: middle, s: 900}}}}
-rules: [{tmp_path / 'fast.stl'}, {tmp_path / 'slow.stl'}, {REPO / 'rules/speed_limit.stl'}]
-""")
+    write_conflicting(tmp_path, REPO)
     rep, diags = plan_scenario(str(tmp_path / "s.yaml"))
     assert rep is not None and rep.status == "fallback"
     assert set(rep.conflicts) == {"go_fast", "stay_slow"}

@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from helpers.world_files import write_conflicting
 from twolevel.cli import app
 from twolevel.pipeline.planning import plan_scenario
 from twolevel.sim.summary import StepDecision
@@ -23,17 +24,7 @@ runner = CliRunner()
 
 @pytest.fixture
 def conflicting(tmp_path: Path) -> Path:
-    """A scenario whose rules contradict each other from the start (faster than 12.2 m/s within
-    0.5 s, never faster than 12 m/s)."""
-    (tmp_path / "fast.stl").write_text("input float v\ngo_fast = always[0.5:1] (v >= 12.2);\n")
-    (tmp_path / "slow.stl").write_text("input float v\nstay_slow = always[0:1] (v <= 12);\n")
-    (tmp_path / "s.yaml").write_text(f"""kind: scenario
-map: {REPO / 'maps/highway.yaml'}
-ego: {{start: {{lane: middle, s: 20}}, speed: 11.0}}
-route: {{start: {{lane: middle, s: 20}}, goal: {{lane: middle, s: 900}}}}
-rules: [{tmp_path / 'fast.stl'}, {tmp_path / 'slow.stl'}, {REPO / 'rules/speed_limit.stl'}]
-""")
-    return tmp_path / "s.yaml"
+    return write_conflicting(tmp_path, REPO)
 
 
 def test_episodes_are_explained_once_each() -> None:
