@@ -51,6 +51,15 @@ rows are written with that delay; when the run ends, is interrupted (Ctrl-C) or 
 remaining rows are completed with the windows truncated at the end (RTAMT's semantics) and
 written before ``run.json`` records the status. Only a killed process loses the last L rows.
 
+**The run directory** is held (:class:`~twolevel.sim.trace.RunDirectory`: locked, outputs
+checked, ``run.json`` written) before the run's first action, so a crash at step 0 or an
+interruption while compiled functions are built is recorded. Interruptions
+(:mod:`twolevel.interruption`) stop the run at a checkpoint: between start-up phases and after
+each step; the closing writes are shielded.
+
+**Rules no plan satisfies.** Each episode of steps in which the high level was infeasible is
+explained once (:mod:`twolevel.sim.unsatisfiable`): SIM618 and the summary's ``unsatisfiable``.
+
 **The goal.** On a route that stops at its goal, the run ends at the first step at which the ego
 stands still (speed ≤ the scenario's stop_speed) within :data:`GOAL_ZONE` of the goal or past it;
 the summary (and ``run.json``) records that time as ``goal_reached_t`` [s] (None otherwise).
@@ -72,6 +81,7 @@ from typing import Callable
 
 import numpy as np
 
+from twolevel import interruption
 from twolevel.control.high_level.conflicts import conflicting_rules
 from twolevel.control.high_level.controller import HighLevelController
 from twolevel.control.low_level.controller import LowLevelController
@@ -80,7 +90,6 @@ from twolevel.control.low_level.settings import LowLevelSettings
 from twolevel.control.low_level.rules import RuleCheck, rule_checks
 from twolevel.control.planner import EgoState, Planner, PlanResult, PlanStatus, Snapshot
 from twolevel.control.registry import CONTROLLERS, planner_named
-from twolevel import interruption
 from twolevel.diagnostics import Diagnostic, Span
 from twolevel.files import DirectoryBusy
 from twolevel.models import fourwheel as fw
