@@ -4,7 +4,9 @@ Exit codes (every command):
 
 * 0 — clean: no finding that fails, every monitored rule satisfied;
 * 1 — findings that fail (errors; warnings too under ``--strict``), or a monitored rule violated;
-* 2 — usage error, unreadable input, or an internal error (reported, never a traceback).
+* 2 — usage error, unreadable input, or an internal error (reported, never a traceback);
+* 128 + N — stopped by signal N outside a run: SIGINT (130), SIGTERM, SIGHUP
+  (:mod:`twolevel.interruption`; ``simulate`` records its run's interruption and exits 2).
 """
 
 from __future__ import annotations
