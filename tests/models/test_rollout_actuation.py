@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import signal
+
 import numpy as np
 import pytest
 
@@ -108,3 +110,31 @@ def test_compiling_leaves_nothing_in_the_working_directory(tmp_path, monkeypatch
     )
     subprocess.run([sys.executable, "-c", code], cwd=tmp_path, check=True)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_ctrl_c_while_the_compiler_runs_is_not_lost(tmp_path) -> None:
+    """casadi's JIT ran the compiler with system(), which ignores SIGINT meanwhile: a Ctrl-C then
+    was discarded and the run went on (regression). The signal is sent once the compiler runs."""
+    import subprocess
+    import sys
+
+    code = (
+        "import os, signal, threading, time\n"
+        "from dataclasses import replace\n"
+        "from twolevel import interruption\n"
+        "from twolevel.models import rollout as r\n"
+        "from twolevel.models.params import VehicleParams\n"
+        "interruption.install()\n"
+        "def children():\n"
+        "    return [c for t in os.listdir('/proc/self/task') for c in open(f'/proc/self/task/{t}/children').read().split()]\n"
+        "def interrupt():\n"
+        "    while not children():\n"
+        "        time.sleep(0.001)\n"
+        "    os.kill(os.getpid(), signal.SIGINT)\n"
+        "threading.Thread(target=interrupt, daemon=True).start()\n"
+        "with interruption.deferred():\n"
+        "    r._substep_function(replace(VehicleParams(), m=1234.5), 0.005, True)\n"
+        "    print('received', interruption.received())\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert out.stdout.split() == ["received", str(int(signal.SIGINT))], out.stderr

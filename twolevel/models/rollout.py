@@ -8,8 +8,8 @@ sequences over H steps at once and returns their states and oriented bounding bo
 Backends (same equations, :mod:`twolevel.models.fourwheel`, agree to 1e-12):
 
 - ``"casadi"``: one internal step as a casadi SX function, compiled to machine code with the
-  system C compiler (casadi's ``jit``, gcc -O2) once per parameter set and step length, then
-  ``mapaccum`` over the substeps and the horizon and ``map`` over the K candidates. Without a
+  system C compiler (casadi's code generator, gcc -O2 in a subprocess) once per parameter set and
+  step length, then ``mapaccum`` over the substeps and the horizon and ``map`` over the K candidates. Without a
   working compiler it falls back to casadi's SX virtual machine (≈ 3× slower).
 - ``"numpy"``: the substep vectorised over K, looping over H × substeps in Python.
 
@@ -22,8 +22,11 @@ The first call per (parameters, dt, H, K) builds the functions (≈ 0.3 s with t
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import os
+import secrets
+import subprocess
 import tempfile
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -64,19 +67,34 @@ def _substep_function(p: VehicleParams, h: float, jit: bool) -> Any:
     delta = ca.SX.sym("delta")
     gamma = ca.SX.sym("gamma")
     cols = fw.substep([x[i] for i in range(fw.NX)], delta, gamma, h, p, casadi_ops())
-    if not jit:
-        return ca.Function("fourwheel_substep", [x, delta, gamma], [ca.vertcat(*cols)])
-    opts = {"jit": True, "compiler": "shell", "jit_temp_suffix": True,
-            "jit_options": {"compiler": "gcc", "flags": ["-O2"], "verbose": False}}
-    # casadi writes its C source and shared object into the current directory (casadi issue
-    # #2230) and removes them when the function is destroyed: compile inside a private build
-    # directory so that a run never litters the user's folder
-    cwd = os.getcwd()
-    os.chdir(_jit_dir())
+    f = ca.Function("fourwheel_substep", [x, delta, gamma], [ca.vertcat(*cols)])
+    return _compiled(f) if jit else f
+
+
+def _compiled(fn: Any) -> Any:
+    """``fn`` as C (casadi's code generator) compiled by the system C compiler (gcc -O2) into a
+    shared object and loaded back (``casadi.external``). The compiler runs as a subprocess in
+    its own session, not through casadi's JIT: that runs it with ``system()``, which ignores
+    SIGINT meanwhile and so discards a Ctrl-C, and a terminal's Ctrl-C would kill the compiler
+    (the run stops at its next checkpoint instead, :mod:`twolevel.interruption`). The files are
+    written in this user's private build directory (never the working directory) and removed
+    once loaded."""
+    import casadi as ca
+
+    build = _jit_dir()
+    stem = f"{fn.name()}_{os.getpid()}_{secrets.token_hex(4)}"
+    c_file, so_file = os.path.join(build, stem + ".c"), os.path.join(build, stem + ".so")
     try:
-        return ca.Function("fourwheel_substep", [x, delta, gamma], [ca.vertcat(*cols)], opts)
+        gen = ca.CodeGenerator(stem + ".c")
+        gen.add(fn)
+        gen.generate(build + os.sep)
+        subprocess.run(["gcc", "-O2", "-fPIC", "-shared", c_file, "-o", so_file, "-lm"], check=True,
+                       capture_output=True, start_new_session=True, timeout=600)
+        return ca.external(fn.name(), so_file)
     finally:
-        os.chdir(cwd)
+        for path in (c_file, so_file):
+            with contextlib.suppress(OSError):
+                os.unlink(path)
 
 
 @functools.lru_cache(maxsize=1)
