@@ -4,11 +4,12 @@ random moments, start-up included, and what each left behind checked
 readable, ``run.json`` saying how the run ended, every completed row intact, ``report`` working).
 
     python benchmarks/interruptions.py                     # 20 interruptions, seed 0
-    python benchmarks/interruptions.py --runs 50 --seed 3 --latest 15
+    python benchmarks/interruptions.py --runs 50 --seed 3 --latest 20
 
 The moments are drawn uniformly between 0 and ``--latest`` seconds after the process starts (on
-a quiet 2-core machine the imports take ~1 s, loading and compiling ~2 s more, and the default
-``--duration 6`` run ~6 s more, so some signals also arrive after the run ended). Prints one
+a quiet 2-core machine the imports take ~1 s, loading and compiling ~2 s more; the default run of
+``--duration 20`` simulated seconds lasts longer than ``--latest``, so every signal interrupts:
+start-up or steps, in proportion to the time each takes). Prints one
 line per run and the totals; exits 1 if any run broke the invariant. Deterministic in its draws
 for a seed (what the process was doing at that moment depends on the machine's speed).
 """
@@ -32,8 +33,8 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--runs", type=int, default=20)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--latest", type=float, default=12.0, metavar="SECONDS", help="latest moment of a signal")
-    ap.add_argument("--duration", type=float, default=6.0, metavar="SECONDS", help="simulated time of each run")
+    ap.add_argument("--latest", type=float, default=15.0, metavar="SECONDS", help="latest moment of a signal")
+    ap.add_argument("--duration", type=float, default=20.0, metavar="SECONDS", help="simulated time of each run")
     ap.add_argument("--scenario", default=str(REPO / "scenarios/traffic_rules.yaml"))
     args = ap.parse_args()
     rng = random.Random(args.seed)
@@ -46,7 +47,7 @@ def main() -> int:
             after = round(rng.uniform(0.0, args.latest), 2)
             r = interrupt_run(args.scenario, Path(tmp) / f"run{i}", signame, after, duration=args.duration)
             results.append(r)
-            print(f"{i:>3} {signame:>7} {r.after_s:>7.2f} {r.exit_code!s:>5} {r.status or '-':>12} {r.rows:>5} "
+            print(f"{i:>3} {signame if r.sent else '(none)':>7} {r.after_s:>7.2f} {r.exit_code!s:>5} {r.status or '-':>12} {r.rows:>5} "
                   f"{r.stop_s:>8.2f}  {'; '.join(r.problems) or 'ok'}", flush=True)
     broken = [r for r in results if not r.ok]
     ended = Counter((r.status or "nothing written") if r.sent else "ended first" for r in results)
