@@ -7,9 +7,9 @@ readable, ``run.json`` saying how the run ended, every completed row intact, ``r
     python benchmarks/interruptions.py --runs 50 --seed 3 --latest 20
 
 The moments are drawn uniformly between 0 and ``--latest`` seconds after the process starts (on
-a quiet 2-core machine the imports take ~1 s, loading and compiling ~2 s more; the default run of
-``--duration 20`` simulated seconds lasts longer than ``--latest``, so every signal interrupts:
-start-up or steps, in proportion to the time each takes). Prints one
+a quiet 2-core machine the imports take ~1 s, loading and compiling ~2 s more, and the default run
+of ``--duration 40`` simulated seconds ~20 s more, so every signal interrupts: start-up or steps,
+in proportion to the time each takes; a run that ends first is counted as such). Prints one
 line per run and the totals; exits 1 if any run broke the invariant. Deterministic in its draws
 for a seed (what the process was doing at that moment depends on the machine's speed).
 """
@@ -34,7 +34,7 @@ def main() -> int:
     ap.add_argument("--runs", type=int, default=20)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--latest", type=float, default=15.0, metavar="SECONDS", help="latest moment of a signal")
-    ap.add_argument("--duration", type=float, default=20.0, metavar="SECONDS", help="simulated time of each run")
+    ap.add_argument("--duration", type=float, default=40.0, metavar="SECONDS", help="simulated time of each run")
     ap.add_argument("--scenario", default=str(REPO / "scenarios/traffic_rules.yaml"))
     args = ap.parse_args()
     rng = random.Random(args.seed)
