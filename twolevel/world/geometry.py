@@ -690,19 +690,23 @@ class Route(Polyline):
         cross = d[:, 0] * rel[:, 1] - d[:, 1] * rel[:, 0]
         return s, cross / np.sqrt(np.where(l2 > 0, l2, 1.0))
 
-    def reference(self, s0: float, v0: float, H: int, dt: float | Sequence[float], a_max: float = 2.0
-                  ) -> tuple[np.ndarray, np.ndarray]:
+    def reference(self, s0: float, v0: float, H: int, dt: float | Sequence[float], a_max: float = 2.0,
+                  d_max: float | None = None, *, beyond: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """Predicted route positions s_k [m] and speeds v_k [m/s], k = 0..H, advancing from
-        (s0, v0) towards the desired speed with |acceleration| ≤ ``a_max`` [m/s²], over H steps
-        of ``dt`` [s] (or of the H step lengths ``dt``)."""
+        (s0, v0) towards the desired speed with acceleration ≤ ``a_max`` and deceleration ≤
+        ``d_max`` (None: ``a_max``) [m/s²], over H steps of ``dt`` [s] (or of the H step lengths
+        ``dt``); positions stop at the route's end unless ``beyond`` (a route that does not stop
+        there: the reference runs on along its last interval's straight extension)."""
+        d_max = a_max if d_max is None else d_max
+        end = math.inf if beyond else float(self.s[-1])
         s = np.empty(H + 1)
         v = np.empty(H + 1)
         s[0], v[0] = s0, v0
         h = [float(dt)] * H if np.ndim(dt) == 0 else [float(x) for x in dt]  # type: ignore[arg-type, union-attr]
         for k in range(H):  # H ≈ 10–20 scalar steps
             target = float(self.desired_speed_at(s[k]))
-            v[k + 1] = min(max(target, v[k] - a_max * h[k]), v[k] + a_max * h[k])
-            s[k + 1] = min(s[k] + 0.5 * (v[k] + v[k + 1]) * h[k], self.s[-1])
+            v[k + 1] = min(max(target, v[k] - d_max * h[k]), v[k] + a_max * h[k])
+            s[k + 1] = min(s[k] + 0.5 * (v[k] + v[k + 1]) * h[k], end)
         return s, v
 
 

@@ -29,7 +29,7 @@ __all__ = [
     "ConnectionSpec", "SignalSpec", "JunctionSpec", "LaneKind", "LaneCategory", "MarkingKind", "ParticipantKind", "Point", "MAX_LANE_POINTS", "MIN_WIDTH", "SpeedLimitSign", "StopSign", "LightCycle",
     "LightStep", "TrafficLight", "MapFile", "LanePos", "Placement", "Box", "Ego", "RouteSpec",
     "IDMParams", "Waypoint", "Participant", "Population", "RuleRef", "ControllerSettings",
-    "RunSettings", "ScenarioFile", "KMH", "Number", "Count", "COORD_MAX", "DEFAULT_SENSOR_RANGE",
+    "RunSettings", "WeightsSpec", "ScenarioFile", "KMH", "Number", "Count", "COORD_MAX", "DEFAULT_SENSOR_RANGE",
     "TIME_MAX", "CONST_MAX", "SEED_MAX", "S_MAX", "MIN_PIECE", "MIN_SPACING", "MAX_ROUTE_POINTS",
     "UserBoundsSpec", "PedestrianBoundsSpec", "ResponseSpec", "AssumptionsSpec",
     "GoalCriterion", "RoadCriterion", "Expect", "NormalDist", "Parameter", "ParameterDeclarations", "Variant",
@@ -509,6 +509,16 @@ class RuleRef(_Model):
         return {"file": data} if isinstance(data, str) else data
 
 
+class WeightsSpec(_Model):
+    """The MPC's cost weights (the paper's: all 1)."""
+
+    u: Number = Field(default=1.0, ge=0, le=1e4, description="weight on ‖u_k‖² (δ [rad], a [m/s²])")
+    du: Number = Field(default=1.0, ge=0, le=1e4, description="weight on ‖u_k − u_(k−1)‖²")
+    track: list[Annotated[Number, Field(ge=0, le=1e4)]] = Field(
+        default_factory=lambda: [1.0, 1.0, 1.0, 1.0], min_length=4, max_length=4,
+        description="weights on the tracking error of x, y, psi, v")
+
+
 class ControllerSettings(_Model):
     """The two-level controller's settings; defaults are the paper's."""
 
@@ -535,6 +545,17 @@ class ControllerSettings(_Model):
                               description="the ego's braking in its RSS distance and sensing speed bound [m/s²]")
     rss_response: Number | None = Field(default=None, ge=0, le=5,
                                         description="the ego's response time in its RSS distance [s] (default dt)")
+    comfort_accel: Number = Field(default=2.0, gt=0, le=10,
+                                  description="the desired speed's comfort acceleration [m/s²] (twolevel/world/speed_profile.py)")
+    comfort_decel: Number = Field(default=2.0, gt=0, le=10,
+                                  description="the desired speed's comfort deceleration before bends, limits, the goal [m/s²]")
+    comfort_jerk: Number = Field(default=2.0, gt=0, le=50,
+                                 description="how fast the desired speed's braking builds up [m/s³]")
+    comfort_lat_accel: Number = Field(default=2.0, gt=0, le=10,
+                                      description="lateral acceleration the desired speed allows in bends [m/s²]")
+    v2i: Annotated[bool, Strict()] = Field(default=False, description="the planner knows the lights' programs (true) or only their state now")
+    weights: WeightsSpec = Field(default_factory=lambda: WeightsSpec(),
+                                 description="the MPC's cost weights {u, du, track: [x, y, psi, v]} (the paper's: all 1)")
 
 
 class RunSettings(_Model):

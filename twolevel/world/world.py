@@ -21,6 +21,7 @@ from twolevel.world.junction import Plan
 from twolevel.world.lanes import build_lanes
 from twolevel.world.loader import Scenario, _route_lanes, sensing_of, successors
 from twolevel.world.schema import ControllerSettings, IDMParams, LightCycle, MapFile, Placement, Population
+from twolevel.world.speed_profile import Comfort, speed_profile
 from twolevel.world.traffic import (
     CONSTANT_VELOCITY, GREEN, IDM, RED, SCRIPTED, STATIONARY, YELLOW, Lights, Participants, SpeedLimits,
     StopLines, TrafficState,
@@ -78,6 +79,12 @@ class Settings:
     v_sense: float = math.inf
     """[m/s] The speed from which the ego stops within its sensing range (D_safe short of a
     standing car just beyond it)."""
+    comfort: Comfort = Comfort()
+    """The desired speed's comfort limits (:mod:`twolevel.world.speed_profile`)."""
+    v2i: bool = False
+    """The planner knows the lights' programs (else only each light's state now)."""
+    weights: tuple[float, float, tuple[float, float, float, float]] = (1.0, 1.0, (1.0, 1.0, 1.0, 1.0))
+    """The MPC's cost weights (u, du, track per x, y, ψ, v)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -168,7 +175,10 @@ def _stops(spec: MapFile, index: dict[str, int], plans: list[Plan]) -> StopLines
                      np.array([r[2] for r in rows], dtype=float), np.array([r[3] for r in rows], dtype=float))
 
 
-def _route(scn: Scenario, lanes: LaneSet, index: dict[str, int], limits: SpeedLimits) -> Route:
+def _route(scn: Scenario, lanes: LaneSet, index: dict[str, int], limits: SpeedLimits, comfort: Comfort,
+           v_sense: float) -> Route:
+    """The route with its limits and its desired speed (:func:`~twolevel.world.speed_profile.speed_profile`
+    under the ``comfort`` limits, at most ``v_sense`` [m/s])."""
     spec = scn.spec
     names = _route_lanes(spec, successors(scn.map.spec)) or [spec.route.start.lane]
     pieces = []
@@ -190,16 +200,11 @@ def _route(scn: Scenario, lanes: LaneSet, index: dict[str, int], limits: SpeedLi
     limit_s, limit_v = np.asarray(ls), np.asarray(lv)
     keep = np.append(np.diff(limit_s) > 0, True)  # a later breakpoint at the same s wins
     limit_s, limit_v = limit_s[keep], limit_v[keep]
-    decel = 2.0  # [m/s²] comfortable deceleration shaping the desired speed
     j = np.clip(np.searchsorted(limit_s, s, side="right") - 1, 0, len(limit_s) - 1)
-    v_des = limit_v[j].astype(float)
-    ahead = limit_s[None, :] - s[:, None]
-    env = np.sqrt(limit_v[None, :] ** 2 + 2 * decel * np.maximum(ahead, 0))
-    v_des = np.minimum(v_des, np.where(ahead > 0, env, np.inf).min(axis=1))
-    if spec.route.stop_at_goal:
-        v_des = np.minimum(v_des, np.sqrt(2 * decel * np.maximum(s[-1] - s, 0)))
+    cap = limit_v[j].astype(float)
     if spec.ego.desired_speed is not None:
-        v_des = np.minimum(v_des, spec.ego.desired_speed)
+        cap = np.minimum(cap, spec.ego.desired_speed)
+    v_des = speed_profile(s, np.minimum(cap, v_sense), kappa, comfort, 0.0 if spec.route.stop_at_goal else None)
     bounds = np.array([p[3] for p in pieces] + [start])
     k = np.clip(np.searchsorted(bounds, s, side="right") - 1, 0, len(pieces) - 1)
     piece = np.array([p[:3] for p in pieces])
@@ -249,7 +254,10 @@ def build_world(scn: Scenario) -> World:
     lights = _lights(m, index, plans)
     stops = _stops(m, index, plans)
     junctions = build_junctions(lanes, index, plans, stops.ids, lights.ids)
-    route = _route(scn, lanes, index, limits)
+    c: ControllerSettings = spec.controller
+    sense = sensing_of(spec)
+    comfort = Comfort(c.comfort_accel, c.comfort_decel, c.comfort_jerk, c.comfort_lat_accel)
+    route = _route(scn, lanes, index, limits, comfort, sense.v_bound)
 
     rows: list[dict[str, object]] = []
     for p in spec.participants:
@@ -287,12 +295,10 @@ def build_world(scn: Scenario) -> World:
                          np.array([r["idm"] for r in rows], dtype=float).reshape(n, 6), st, sxy)
     traffic0 = TrafficState(0.0, col("x"), col("y"), col("psi"), col("v"), col("lane", int), col("s"), col("lat"),
                             np.ones(n, dtype=bool), np.zeros(n), np.full(n, -1, dtype=int))
-    c: ControllerSettings = spec.controller
-    sense = sensing_of(spec)
     settings = Settings(c.H, c.dt, c.r_near, c.r, c.D_safe, c.samples, c.time_limit, c.solver, c.stop_speed,
                         c.yellow_decel, spec.run.duration, spec.run.seed, c.horizon_s, c.coarse_dt,
                         None if c.coarse_steps is None else tuple(c.coarse_steps), c.rss, sense.range, sense.response,
-                        sense.v_bound)
+                        sense.v_bound, comfort, c.v2i, (c.weights.u, c.weights.du, tuple(c.weights.track)))
     ego = EgoStart(ex, ey, epsi, spec.ego.speed, spec.ego.box.length, spec.ego.box.width,
                    MappingProxyType(dict(spec.ego.vehicle)))
     rs = route.from_lane(stops.lane, stops.s)

@@ -143,13 +143,16 @@ def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, set
     else:
         s_arr, e_arr = route.local_coordinates(x0[None, :2])
     s0 = float(s_arr[0])
-    s_ref, v_ref = route.reference(s0, max(float(x0[3]), 0.0), len(steps), steps)
+    comfort = world.settings.comfort
+    stops = bool(route.v_des.size and route.v_des[-1] <= 1e-9)
+    s_ref, v_ref = route.reference(s0, max(float(x0[3]), 0.0), len(steps), steps, comfort.accel, comfort.decel,
+                                   beyond=not stops)
     hc = horizon_constants(world, traffic, t, x0, dt=dt, s_pred=s_ref, memory=memory, station=(s0, float(e_arr[0])),
                            ticks=np.asarray(settings.ticks))
     # the reference ends with a stop where the plan must stop: the goal (when the route stops
     # there) and a stop line / red light a rule guards that full braking can still stop before
     d_brake, v_brake = braking(float(x0[3]), settings.ticks[-1], dt, params)
-    s_end = float(route.s[-1]) if route.v_des.size and route.v_des[-1] <= 1e-9 else math.inf
+    s_end = float(route.s[-1]) if stops else math.inf
     if any(stop_rules):
         lines = stop_lines(hc, stop=stop_rules[0], light=stop_rules[1])
         s_near = float(min(lines[0], lines[-1]))
@@ -173,12 +176,12 @@ def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, set
             lane = passing.lane if any(sides) else 0.0
         if not any(sides):
             # approached as a stop line is (settings.stop_decel), more gently than RSS's braking
-            comfort = replace(world.settings.response, brake_min=min(world.settings.response.brake_min,
+            gentle = replace(world.settings.response, brake_min=min(world.settings.response.brake_min,
                                                                      settings.stop_decel))
-            follow = Follow(front.s, front.v, front.offset + world.settings.D_safe, comfort)
+            follow = Follow(front.s, front.v, front.offset + world.settings.D_safe, gentle)
     if math.isfinite(s_end) or follow is not None:
         s_ref, v_ref = _reference_to(route, s0, max(float(x0[3]), 0.0), steps, s_end, settings.stop_decel,
-                                     follow=follow)
+                                     comfort.accel, follow)
         hc = replace(hc, s_ref=s_ref, v_max=route.limit_at(s_ref).astype(float))
     v_ref = np.minimum(v_ref, route.limit_at(s_ref))
     pts = route.position(s_ref, lane)
