@@ -45,5 +45,7 @@ YML430 = Code("YML430", "look-ahead-invalid", E,
               "The MPC's look-ahead (horizon_s, coarse_dt, coarse_steps) is not whole periods or contradicts itself.")
 YML431 = Code("YML431", "sensing-short", W,
               "The sensing range is shorter than the stopping distance at the speeds the scenario allows.")
+YML432 = Code("YML432", "bend-too-fast", W,
+              "A bend of the route cannot be driven at its speed limit within the comfort lateral acceleration.")
 
 __all__ = [name for name in dir() if name.startswith("YML")]

@@ -8,7 +8,12 @@
   deadline (``expect.goal.by``);
 * YML431: the ego cannot stop within its sensing range from the highest speed the scenario
   allows (the same speed): it will keep below the speed it can stop from
-  (:class:`~twolevel.world.loader.Sensing`), slower than the scenario asks.
+  (:class:`~twolevel.world.loader.Sensing`), slower than the scenario asks;
+* YML432: a bend of the route cannot be driven at the speed limit in force there (capped by
+  the desired speed) within the comfort lateral acceleration (``controller.comfort_lat_accel``):
+  the desired speed (:mod:`twolevel.world.speed_profile`) slows the ego below the limit there.
+  Reported at the sign (or the lane's own limit) in force, or at the bend's arc when the map's
+  default limit holds.
 
 Imported by ``twolevel check``: pydantic, PyYAML and the standard library only.
 """
@@ -21,13 +26,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from twolevel.diagnostics import Diagnostic
-from twolevel.world.codes import YML426, YML427, YML431
-from twolevel.world.schema import Parameter
+from twolevel.world.codes import YML426, YML427, YML431, YML432
+from twolevel.world.schema import LaneSpec, Parameter, Road
 
 if TYPE_CHECKING:
     from twolevel.world.loader import Scenario
 
-__all__ = ["lint_scenario", "lint_world_file", "extremes", "fastest", "MAX_CORNERS"]
+__all__ = ["lint_scenario", "lint_world_file", "extremes", "fastest", "lane_bends", "MAX_CORNERS"]
 
 MAX_CORNERS = 16
 """Parameter boxes with at most this many corners are also checked at every corner."""
@@ -158,9 +163,76 @@ def _sensing(scn: "Scenario") -> list[Diagnostic]:
         hint=f"set controller.sensor_range to at least {math.ceil(need)} m, or lower the speed this scenario allows")]
 
 
+def lane_bends(road: "Road", lane: "LaneSpec") -> list[tuple[float, float, float, int]]:
+    """The bends of ``lane`` of ``road``: (s_from, s_to [m] along the lane in its direction of
+    travel, radius [m] of the lane's centre line, the road's segment index), one per arc."""
+    from twolevel.world.layout import pieces
+
+    out, s, heading = [], 0.0, math.radians(road.start.heading)
+    for p in pieces(road):
+        if p.start.heading != heading:  # a polyline corner: the sampled lane's chord
+            s += 2 * abs(lane.offset) * abs(math.sin((p.start.heading - heading) / 2))
+        length = p.length * abs(1 - lane.offset * p.curvature) if p.curvature else p.length
+        if p.curvature:
+            out.append((s, s + length, abs(1.0 / p.curvature - lane.offset), p.segment))
+        s += length
+        heading = p.end.heading
+    if lane.direction == "backward":
+        out = [(s - b, s - a, r, j) for a, b, r, j in reversed(out)]
+    return out
+
+
+def _bends(scn: "Scenario") -> list[Diagnostic]:
+    """YML432 at the speed-limit sign (or the lane's own limit) in force in a bend of the route
+    that cannot be driven at the comfort lateral acceleration, else at the bend's arc."""
+    from twolevel.world.loader import _read_kind, _route_lanes, successors
+
+    spec, m = scn.spec, scn.map.spec
+    lanes = _route_lanes(spec, successors(m)) or [spec.route.start.lane]
+    a_lat = spec.controller.comfort_lat_accel
+    where = {ln.id: (i, j, road, ln) for i, road in enumerate(m.roads) for j, ln in enumerate(road.lane_specs())}
+    out: list[Diagnostic] = []
+    docs: dict[str, object] = {}
+    for n, lane_id in enumerate(lanes):
+        i, j, road, lane = where[lane_id]
+        lo = spec.route.start.s if n == 0 else -math.inf
+        hi = spec.route.goal.s if n == len(lanes) - 1 else math.inf
+        signs = sorted(((sign.s, k, sign.value) for k, sign in enumerate(m.speed_limits) if sign.lane == lane_id))
+        for a, b, radius, seg in lane_bends(road, lane):
+            a, b = max(a, lo), min(b, hi)
+            if b <= a:
+                continue
+            # the limits in force over [a, b]: the last sign before a (or the lane's own), the signs within
+            before = [x for x in signs if x[0] <= a]
+            in_force = ([(None, before[-1][1], before[-1][2])] if before else
+                        [(("roads", i, "lanes", j, "speed_limit") if lane.speed_limit else None, None,
+                          lane.speed_limit or m.default_speed_limit)])
+            in_force += [(None, k, value) for s_sign, k, value in signs if a < s_sign < b]
+            key, k, v = max(in_force, key=lambda x: x[2])
+            v_drive = min(v, spec.ego.desired_speed) if spec.ego.desired_speed is not None else v
+            need = v_drive * v_drive / radius
+            if need <= a_lat + 1e-9:
+                continue
+            if scn.map.path not in docs:
+                docs[scn.map.path], _ = _read_kind(Path(scn.map.path), "map", None)
+            doc = docs[scn.map.path]
+            if doc is None:
+                continue
+            loc = ("speed_limits", k, "value") if k is not None else key or ("roads", i, "segments", seg, "arc")
+            v_ok = math.sqrt(a_lat * radius)
+            out.append(YML432(
+                f"the limit {v:g} m/s{'' if v_drive == v else f' (desired speed {v_drive:g} m/s)'} cannot be driven "
+                f"through the {radius:.1f} m bend of lane '{lane_id}' (route {scn.path}): {need:.1f} m/s² of lateral "
+                f"acceleration, more than the comfort {a_lat:g} m/s²; the ego will slow to {v_ok:.1f} m/s there",
+                doc.locate(loc, value=True),  # type: ignore[attr-defined]
+                hint=f"a sign of at most {math.floor(v_ok * 10) / 10:g} m/s before the bend, or "
+                     "controller.comfort_lat_accel if this is meant"))
+    return out
+
+
 def lint_scenario(scn: "Scenario") -> list[Diagnostic]:
     """Every warning of this module for a loaded scenario."""
-    return _parameter_ranges(scn) + _goal_time(scn) + _sensing(scn)
+    return _parameter_ranges(scn) + _goal_time(scn) + _sensing(scn) + _bends(scn)
 
 
 def lint_world_file(path: str) -> list[Diagnostic]:
