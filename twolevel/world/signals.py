@@ -4,7 +4,8 @@ Two faces, one set of definitions (see :mod:`twolevel.world.provided` for the li
 
 * :func:`signals_along` — per step along a recorded or simulated ego trajectory (monitors);
 * :func:`horizon_constants` — over an MPC horizon, the values known at solve time (limits at
-  the predicted positions, light states from their programs, stop-line positions, other
+  the predicted positions, light states (from their programs with ``v2i``, else the state now
+  held over the horizon), stop-line positions, other
   vehicles' constant-velocity predictions). The MPC treats v_k and s_k as affine in its decision
   variables and forms d_stop,k = s_stop − s_k, d_light,k = s_light − s_k itself.
 
@@ -326,7 +327,8 @@ def horizon_constants(
     if okl.any():
         j = int(np.flatnonzero(okl)[np.argmin(dl[okl])])
         s_light = float(world.route_lights[j])
-        states = world.lights.state_at(t)[:, world.route_light_index[j]]
+        # what the planner knows: the light's program (V2I), else only its state now, held
+        states = world.lights.state_at(t if world.settings.v2i else np.full_like(t, t0))[:, world.route_light_index[j]]
         can_stop = dl[j] >= v**2 / (2 * world.settings.yellow_decel)
         light_red = ((states == RED) | ((states == YELLOW) & can_stop)).astype(float)
     # other vehicles within r_near, constant velocity
