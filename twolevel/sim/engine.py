@@ -62,7 +62,11 @@ explained once (:mod:`twolevel.sim.unsatisfiable`): SIM618 and the summary's ``u
 
 **The goal.** On a route that stops at its goal, the run ends at the first step at which the ego
 stands still (speed ≤ the scenario's stop_speed) within :data:`GOAL_ZONE` of the goal or past it;
-the summary (and ``run.json``) records that time as ``goal_reached_t`` [s] (None otherwise).
+the summary (and ``run.json``) records that time as ``goal_reached_t`` [s] (None otherwise). On a
+route that does not stop there (``stop_at_goal: false``) the ego drives on at its desired speed
+(the reference runs straight on past the route's end), ``goal_reached_t`` is the first step
+within :data:`GOAL_ZONE` of the goal on the route's lane, and the run ends when the ego passes
+the route's end.
 
 **Determinism.** Everything but the timing columns (:data:`TIMING_COLUMNS`) is a function of
 the scenario and the seed, provided the high level is (its time limit can make a plan depend on
@@ -521,16 +525,22 @@ class ClosedLoop:
             self.unsatisfiable.observe(sensed.t, not plan.ok and PlanStatus.INFEASIBLE in (plan.cause, plan.status),
                                        applied.decision, sensed.v, lambda: self.conflicts(sensed))
             recent.append(times.step)
-            # the run ends when the ego stands still at the goal (GOAL_ZONE before it or past it)
-            if stops_at_goal and sensed.s0 >= goal_s - GOAL_ZONE and abs(sensed.v) <= s.stop_speed:
+            # the run ends when the ego stands still at the goal (GOAL_ZONE before it or past it),
+            # or, on a route that does not stop there, when it drives past the route's end
+            at_goal = sensed.s0 >= goal_s - GOAL_ZONE
+            if stops_at_goal and at_goal and abs(sensed.v) <= s.stop_speed:
                 self.goal_reached_t = round(sensed.t, 9)
+            elif not stops_at_goal and self.goal_reached_t is None and at_goal and \
+                    abs(sensed.now["e"]) <= 0.5 * float(w.route.width_at(goal_s)):
+                self.goal_reached_t = round(sensed.t, 9)
+            done = stops_at_goal and self.goal_reached_t is not None or not stops_at_goal and sensed.s0 >= goal_s
             if progress is not None:
                 wall = time.perf_counter() - self.t_wall0
                 progress(StepInfo(k + 1, steps, round((k + 1) * dt, 9), s.duration,
                                   1000.0 * len(recent) / max(sum(recent), 1e-9), times.step,
                                   int(sensed.now["n_near"]), applied.decision,
                                   (k + 1) * dt / wall if wall > 0 else math.inf))
-            if self.goal_reached_t is not None:
+            if done:
                 break
             interruption.checkpoint()  # a signal received during the step stops the run here
 

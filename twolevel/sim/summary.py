@@ -189,7 +189,7 @@ class RunSummary:
     closest: tuple[Closest, ...] = ()
     decisions: Mapping[str, int] = field(default_factory=dict)
     decisions_by_level: Mapping[str, int] = field(default_factory=dict)
-    goal_reached_t: float | None = None  # [s] when the ego stood still at the goal (the run ends there)
+    goal_reached_t: float | None = None  # [s] when the ego reached the goal (stood still there, or passed it)
     step_cpu_ms_median: float = math.nan
     step_cpu_ms_p99: float = math.nan
     step_cpu_ms_max: float = math.nan

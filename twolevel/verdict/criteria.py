@@ -48,6 +48,7 @@ from twolevel.sim.summary import intervals
 from twolevel.sim.trace import RunStatus
 from twolevel.verdict.drivable import area_outside, box_outside
 from twolevel.verdict.motion import motion_of
+from twolevel.verdict.ride import standstills
 from twolevel.world.schema import Expect, GoalCriterion, RoadCriterion
 
 __all__ = ["Criterion", "Verdict", "judge", "RULE_PREFIX"]
@@ -247,10 +248,8 @@ def _upper(name: str, measured: float, at: float | None, bound: float, unit: str
 
 
 def _stopped(world: Any, cols: Mapping[str, Any], summary: Mapping[str, Any], stop_speed: float) -> tuple[float, float | None]:
-    t, v = cols["t"], np.asarray(cols["v"], dtype=float)
-    starts, ends = intervals(np.abs(v) <= stop_speed)
-    if summary.get("goal_reached_t") is not None and ends.size and ends[-1] == t.size - 1:
-        starts, ends = starts[:-1], ends[:-1]  # standing at the goal is arriving, not being stuck
+    t = cols["t"]
+    starts, ends = standstills(cols["v"], stop_speed, arrived=summary.get("goal_reached_t") is not None)
     if not starts.size:
         return 0.0, None
     lengths = (ends - starts + 1) * _dt(t)

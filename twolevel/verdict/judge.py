@@ -3,7 +3,8 @@
 :func:`judge_run` loads the scenario the run names (or the one given), builds its world (the
 lanes, the route, the ego's box), judges :mod:`twolevel.verdict.criteria` and records the
 verdict in ``run.json`` (key ``verdict``, beside the engine's ``summary``) with the lane edges
-the report draws (key ``road_edges``), atomically. Nothing of the run is re-simulated.
+the report draws (key ``road_edges``) and the ride's figures (key ``ride``,
+:mod:`twolevel.verdict.ride`), atomically. Nothing of the run is re-simulated.
 """
 
 from __future__ import annotations
@@ -14,8 +15,9 @@ from typing import Any, Mapping
 
 from twolevel.diagnostics import Diagnostic, Span
 from twolevel.verdict.criteria import Verdict, judge
+from twolevel.verdict.ride import RIDE_KEY, Ride, ride_of
 
-__all__ = ["judge_run", "recorded_verdict", "criteria_of", "VERDICT_KEY", "EDGES_KEY"]
+__all__ = ["judge_run", "recorded_verdict", "recorded_ride", "criteria_of", "VERDICT_KEY", "EDGES_KEY"]
 
 VERDICT_KEY = "verdict"
 EDGES_KEY = "road_edges"
@@ -49,12 +51,29 @@ def judge_run(run_dir: str | os.PathLike[str], scenario: str | os.PathLike[str] 
                     meta.get("settings"))
     if write:
         meta[VERDICT_KEY] = verdict.to_json()
+        meta[RIDE_KEY] = ride_of(world, run.columns, _goal_time(verdict, meta),
+                                 float((meta.get("settings") or {}).get("stop_speed", world.settings.stop_speed))).to_json()
         meta[EDGES_KEY] = lane_edges(world.lanes)
         try:
             write_json_atomic(Path(run_dir) / RUN_FILE, meta)
         except OSError as exc:
             diags.append(SIM620(f"cannot record the verdict in {RUN_FILE}: {exc}", where))
     return verdict, diags
+
+
+def _goal_time(verdict: Verdict, meta: Mapping[str, Any]) -> float | None:
+    """[s] When the goal was reached: the goal criterion's measure, else the engine's record."""
+    goal = verdict.get("goal")
+    if goal is not None:
+        return goal.measured
+    reached = (meta.get("summary") or {}).get("goal_reached_t")
+    return None if reached is None else float(reached)
+
+
+def recorded_ride(meta: Mapping[str, object]) -> Ride | None:
+    """The ride recorded in a run's ``run.json`` (None when the run was never judged)."""
+    raw = meta.get(RIDE_KEY)
+    return Ride.from_json(raw) if isinstance(raw, Mapping) else None
 
 
 def recorded_verdict(meta: Mapping[str, object]) -> Verdict | None:
