@@ -7,7 +7,9 @@ its goal; else how far the ego got), the smallest centre distance, the control s
 levels, sensing and the verifier: wall-clock median / p99 / max, targets p99 ≤ 50 ms and every
 step < 100 ms; and the same step's CPU time, what it costs when other jobs share the cores),
 the safety layer's outcomes, the smallest time to react, braking (peak deceleration; share of
-steps braking harder than 4 m/s²), decisions and rule violations. The paper's four are compared
+steps braking harder than 4 m/s²), the ride (:mod:`twolevel.verdict.ride`: the peak offset from
+the centre of the lane the ego is in, peak deceleration and |jerk|, time standing still on the
+way), the verdict of the scenario's pass criteria (``expect:``), decisions and rule violations. The paper's four are compared
 with the goal times and distances measured before the safety layer (``BEFORE``: main at
 fb74f82, the same machine; target: no later than 10 % after them). A closing line counts
 at-fault collisions, goals missed, runs over the time targets. Run directories go to ``--out``
@@ -31,6 +33,7 @@ import numpy as np
 
 from twolevel.sim.engine import simulate_scenario
 from twolevel.sim.trace import read_run
+from twolevel.verdict.judge import judge_run, recorded_ride
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ("traffic_rules", "safety", "scalability", "comparison")
@@ -82,15 +85,19 @@ def _progress(name: str, ctrl: str, s, run_dir: Path) -> tuple[str, str]:  # noq
     return got, f"before s {value:.0f} m ({s_end / value:.2f}x)"
 
 
-def _row(label: str, s, got: str, before: str) -> str:  # noqa: ANN001 - RunSummary
+def _row(label: str, s, got: str, before: str, ride, verdict) -> str:  # noqa: ANN001 - RunSummary, Ride, Verdict
     coll = f"{s.at_fault}/{len(s.collisions)}"
     ver = " ".join(f"{k[:4]}:{v}" for k, v in sorted(s.verification.items()))
     dec = " ".join(f"{k}:{v}" for k, v in sorted(s.decisions.items()))
     viol = ",".join(f"{v.rule}x{v.steps}" for v in s.violations if v.steps) or "-"
+    judged = "-" if verdict is None else "PASS" if verdict.passed else "FAIL " + ",".join(c.name for c in verdict.failed)
+    nan = float("nan")
+    offset, jerk, stopped = (nan, nan, nan) if ride is None else (ride.lane_offset, ride.jerk, ride.stopped)
     return (f"{label:<32} {coll:>5} {got:>14} {before:<26} {s.min_distance:6.2f} "
             f"{s.step_ms_median:6.1f} {s.step_ms_p99:6.1f} {s.step_ms_max:6.1f} | "
             f"{s.step_cpu_ms_median:5.1f} {s.step_cpu_ms_p99:5.1f} {s.step_cpu_ms_max:5.1f} | "
-            f"{s.ttr_min_s:5.1f} {s.decel_peak:5.2f} {100 * s.hard_braking_share:5.1f}% | {ver} | {dec} | viol {viol}")
+            f"{offset:5.2f} {s.decel_peak:5.2f} {jerk:6.1f} {stopped:5.1f} {100 * s.hard_braking_share:5.1f}% "
+            f"{s.ttr_min_s:5.1f} | {judged} | {ver} | {dec} | viol {viol}")
 
 
 def main() -> None:
@@ -110,9 +117,10 @@ def main() -> None:
     print(f"machine: {_machine()}; load {_load()} at the start; {mode}")
     print(f"runs in {out}")
     print(f"{'scenario / planner':<32} {'fault':>5} {'goal':>14} {'before':<26} {'min d':>6} "
-          f"{'med':>6} {'p99':>6} {'max':>6} | {'cpu':>5} {'p99':>5} {'max':>5} | {'ttr':>5} {'decel':>5} {'>4':>6} | "
-          "verification | decisions | violations   (ms, s, m/s²)")
-    faults = runs = missed = over_p99 = over_max = over_p99_cpu = over_max_cpu = 0
+          f"{'med':>6} {'p99':>6} {'max':>6} | {'cpu':>5} {'p99':>5} {'max':>5} | {'|off|':>5} {'decel':>5} "
+          f"{'jerk':>6} {'stop':>5} {'>4':>6} {'ttr':>5} | verdict | verification | decisions | violations   "
+          "(ms; |off|: peak offset from the lane's centre, m; m/s², m/s³, s)")
+    faults = runs = missed = failed = over_p99 = over_max = over_p99_cpu = over_max_cpu = 0
     for name in names:
         for ctrl in ctrls:
             run_dir = out / f"{name}_{ctrl}"
@@ -123,17 +131,20 @@ def main() -> None:
             if s is None:
                 print(f"{label:<32} failed: " + "; ".join(d.message for d in diags if d.is_error), flush=True)
                 continue
+            verdict, _ = judge_run(run_dir, _path(name))
+            ride = recorded_ride(read_run(run_dir).meta)
             got, before = _progress(name, ctrl, s, run_dir)
-            print(_row(label, s, got, before), flush=True)
+            print(_row(label, s, got, before, ride, verdict), flush=True)
             runs += 1
             faults += s.at_fault
             missed += s.goal_reached_t is None
+            failed += verdict is not None and not verdict.passed
             over_p99 += s.step_ms_p99 > 50.0
             over_max += s.step_ms_max >= 100.0
             over_p99_cpu += s.step_cpu_ms_p99 > 50.0
             over_max_cpu += s.step_cpu_ms_max >= 100.0
     print(f"{runs} runs: {faults} collisions the ego's fault (target 0); goal not reached in {missed} "
-          f"(the stalled-car and tailgater scenarios have no lawful way); wall p99 > 50 ms in {over_p99}, "
+          f"(the stalled-car and tailgater scenarios have no lawful way); {failed} failed their criteria; wall p99 > 50 ms in {over_p99}, "
           f"a step ≥ 100 ms in {over_max}; CPU p99 > 50 ms in {over_p99_cpu}, a step ≥ 100 ms in {over_max_cpu}; "
           f"load {_load()} at the end")
 

@@ -50,12 +50,14 @@ def _run_row(m: Metrics, meta: Mapping[str, Any]) -> tuple[str, ...]:
 
 
 def _verdict_section(meta: Mapping[str, Any]) -> str:
-    from twolevel.report.verdict import CRITERIA_HEADER, criteria_rows, goal_status, verdict_line, verdict_of
+    from twolevel.report.verdict import CRITERIA_HEADER, criteria_rows, goal_status, ride_line, verdict_line, verdict_of
 
     verdict = verdict_of(meta)
     klass = "warn" if verdict is None else ("ok" if verdict.passed else "alert")
     parts = ["<h2>Verdict</h2>", f'<div class="{klass}">{_e(verdict_line(verdict))}</div>',
              f"<p><strong>Goal:</strong> {_e(goal_status(verdict))}</p>"]
+    if ride_line(meta):
+        parts.append(f"<p><strong>Ride:</strong> {_e(ride_line(meta))}</p>")
     rows = criteria_rows(verdict)
     if rows:
         parts.append(_table(CRITERIA_HEADER, rows, numeric_from=2))

@@ -15,7 +15,7 @@ from twolevel.report.metrics import COLLISION_LINE_M, DECISION_LEVEL, Metrics, R
 #: run.json keys shown in the provenance table, in order (the rest are listed after them).
 PROVENANCE_KEYS = ("scenario", "status", "error", "rows", "seed", "settings", "rules", "versions", "wall_time_s")
 #: run.json keys never shown (bulky geometry, or shown elsewhere).
-HIDDEN_KEYS = frozenset({"map_lines", "summary", "verdict", "road_edges"})
+HIDDEN_KEYS = frozenset({"map_lines", "summary", "verdict", "road_edges", "ride"})
 
 
 def fmt(value: Any, digits: int = 3, unit: str = "") -> str:
@@ -140,6 +140,7 @@ def summary_payload(
         "report": {"generator": f"twolevel {version}".strip(), "files": list(files), "problems": list(problems)},
         "provenance": {k: _jsonable(v) for k, v in provenance(meta)},
         "verdict": meta.get("verdict"),
+        "ride": meta.get("ride"),
         "metrics": metrics.to_dict(),
         "compared": [m.to_dict() for m in compared],
         "comparison": comparison.to_dict() if comparison is not None else None,
@@ -189,10 +190,12 @@ def render_markdown(
         parts.append(f"> **{a}**")
     if problems:
         parts += ["", "## Problems", ""] + [f"- {p}" for p in problems]
-    from twolevel.report.verdict import CRITERIA_HEADER, criteria_rows, goal_status, verdict_line, verdict_of
+    from twolevel.report.verdict import CRITERIA_HEADER, criteria_rows, goal_status, ride_line, verdict_line, verdict_of
 
     verdict = verdict_of(meta)
     parts += ["", "## Verdict", "", verdict_line(verdict), "", f"Goal: {goal_status(verdict)}"]
+    if ride_line(meta):
+        parts += ["", f"Ride: {ride_line(meta)}"]
     if verdict is not None:
         parts += ["", _md_table(CRITERIA_HEADER, criteria_rows(verdict))]
     parts += ["", "## Headline", "", _md_table(("metric", "value"), headline(metrics))]

@@ -6,9 +6,9 @@ from __future__ import annotations
 from typing import Any, Mapping
 
 from twolevel.verdict.criteria import Verdict
-from twolevel.verdict.judge import recorded_verdict
+from twolevel.verdict.judge import recorded_ride, recorded_verdict
 
-__all__ = ["verdict_of", "goal_status", "criteria_rows", "verdict_line", "CRITERIA_HEADER"]
+__all__ = ["verdict_of", "goal_status", "criteria_rows", "verdict_line", "ride_line", "CRITERIA_HEADER"]
 
 CRITERIA_HEADER = ("criterion", "verdict", "measured", "bound", "margin", "detail")
 
@@ -48,3 +48,13 @@ def criteria_rows(verdict: Verdict | None) -> list[tuple[str, ...]]:
         return []
     return [(c.name, "pass" if c.passed else "FAIL", _num(c.measured, c.unit), _num(c.bound, c.unit), _num(c.margin),
              c.detail) for c in verdict.criteria]
+
+
+def ride_line(meta: Mapping[str, Any]) -> str:
+    """The ride's figures in one line (:mod:`twolevel.verdict.ride`; empty when not recorded)."""
+    ride = recorded_ride(meta)
+    if ride is None:
+        return ""
+    goal = "not reached" if ride.goal_t is None else f"{ride.goal_t:.1f} s"
+    return (f"goal {goal}; peak |offset| from the lane's centre {_num(ride.lane_offset, 'm')}; peak deceleration "
+            f"{_num(ride.decel, 'm/s²')}; peak |jerk| {_num(ride.jerk, 'm/s³')}; stopped {_num(ride.stopped, 's')}")
