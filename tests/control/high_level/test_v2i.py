@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.helpers.mpc_worlds import controller, make_world
+from helpers.mpc_worlds import controller, make_world
 from twolevel.world.signals import horizon_constants
 from twolevel.world.world import World, load_rulesets
 
