@@ -35,7 +35,7 @@ from twolevel.world.codes import YML420
 from twolevel.world.document import Document
 from twolevel.world.schema import MIN_PIECE, MIN_WIDTH, FreeLane, LaneSpec, MapFile, Road, Segment
 
-__all__ = ["Pose", "Piece", "pieces", "lane_length", "lane_lengths", "lane_ends", "check_layout", "free_centre",
+__all__ = ["Pose", "Piece", "pieces", "lane_pieces", "lane_length", "lane_lengths", "lane_ends", "check_layout", "free_centre",
            "free_ends", "polyline_length", "all_lane_ends", "road_outline"]
 
 
@@ -102,18 +102,26 @@ def pieces(road: Road) -> Iterator[Piece]:
                 pose = end
 
 
-def lane_length(road: Road, offset: float) -> float:
-    """Length [m] of the lane ``offset`` [m] left of ``road``'s reference line: arcs at radius
-    R − offset·sign(angle), straight legs as drawn, plus a chord 2·|offset|·sin(|turn|/2) at each
-    corner where the heading jumps (the sampled lane's corner)."""
-    total = 0.0
+def lane_pieces(road: Road, offset: float) -> Iterator[tuple[float, float, Piece]]:
+    """The pieces of the lane ``offset`` [m] left of ``road``'s reference line with where each
+    starts and ends along the lane, (s_from, s_to [m], piece), in the road's direction: arcs at
+    radius R − offset·sign(angle), straight legs as drawn, and a chord 2·|offset|·sin(|turn|/2)
+    at each corner where the heading jumps (the sampled lane's corner) before the leg after it."""
+    s = 0.0
     heading = math.radians(road.start.heading)  # a polyline may turn at the very start
     for p in pieces(road):
         if p.start.heading != heading:
-            total += 2 * abs(offset) * abs(math.sin((p.start.heading - heading) / 2))
-        total += p.length * abs(1 - offset * p.curvature) if p.curvature else p.length
+            s += 2 * abs(offset) * abs(math.sin((p.start.heading - heading) / 2))
+        length = p.length * abs(1 - offset * p.curvature) if p.curvature else p.length
+        yield s, s + length, p
+        s += length
         heading = p.end.heading
-    return total
+
+
+def lane_length(road: Road, offset: float) -> float:
+    """Length [m] of the lane ``offset`` [m] left of ``road``'s reference line
+    (:func:`lane_pieces`)."""
+    return max((b for _, b, _ in lane_pieces(road, offset)), default=0.0)
 
 
 def lane_lengths(spec: MapFile) -> dict[str, float]:

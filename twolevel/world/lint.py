@@ -166,19 +166,13 @@ def _sensing(scn: "Scenario") -> list[Diagnostic]:
 def lane_bends(road: "Road", lane: "LaneSpec") -> list[tuple[float, float, float, int]]:
     """The bends of ``lane`` of ``road``: (s_from, s_to [m] along the lane in its direction of
     travel, radius [m] of the lane's centre line, the road's segment index), one per arc."""
-    from twolevel.world.layout import pieces
+    from twolevel.world.layout import lane_pieces
 
-    out, s, heading = [], 0.0, math.radians(road.start.heading)
-    for p in pieces(road):
-        if p.start.heading != heading:  # a polyline corner: the sampled lane's chord
-            s += 2 * abs(lane.offset) * abs(math.sin((p.start.heading - heading) / 2))
-        length = p.length * abs(1 - lane.offset * p.curvature) if p.curvature else p.length
-        if p.curvature:
-            out.append((s, s + length, abs(1.0 / p.curvature - lane.offset), p.segment))
-        s += length
-        heading = p.end.heading
+    pieces = list(lane_pieces(road, lane.offset))
+    out = [(a, b, abs(1.0 / p.curvature - lane.offset), p.segment) for a, b, p in pieces if p.curvature]
     if lane.direction == "backward":
-        out = [(s - b, s - a, r, j) for a, b, r, j in reversed(out)]
+        total = pieces[-1][1] if pieces else 0.0
+        out = [(total - b, total - a, r, j) for a, b, r, j in reversed(out)]
     return out
 
 
