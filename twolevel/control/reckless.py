@@ -2,8 +2,8 @@
 ignores everything else — other traffic, stop signs, lights and every rule.
 
 Each step it plans H steps of the kinematic bicycle (:mod:`twolevel.models.bicycle`) that track
-the route: the speed goes to the route's desired speed (the limit in force, lowered ahead of a
-lower limit and of the goal when the route stops there; the scenario's ``desired_speed`` caps it)
+the route: the speed goes to the route's desired speed (the limit in force, lowered for bends,
+ahead of a lower limit and of the goal when the route stops there, :mod:`twolevel.world.speed_profile`)
 at the bicycle's acceleration bounds; the steering follows the route's curvature (δ = atan(l_f·κ))
 with Stanley's correction of the heading and lateral errors, within the steering limit and the
 lateral-acceleration bound |tan δ| ≤ a_lat_max·l_f/v². It never looks at the traffic it is given.

@@ -615,8 +615,8 @@ class Route(Polyline):
 
     ``limit_s``/``limit_v``: the limit ``limit_v[j]`` [m/s] holds from route position
     ``limit_s[j]`` [m] on (``limit_s[0] == 0``). ``v_des`` (K,) [m/s] is the desired speed at each
-    vertex: the limit, lowered ahead of lower limits (and of B when stopping there) so that
-    decelerating at ``decel`` [m/s²] meets them. ``width`` (K,) [m] is the lane width along it.
+    vertex (:func:`twolevel.world.speed_profile.speed_profile`): the limit, lowered in and ahead
+    of bends, of lower limits and of B when stopping there, within comfort limits. ``width`` (K,) [m] is the lane width along it.
     ``pieces``: (lane index, s_from, s_to, route s_from) for each lane the route runs along.
     """
 

@@ -1,8 +1,9 @@
 """The MPC's reference over one horizon: the waypoints ω_k the plan tracks, and where it must stop.
 
 :func:`reference` projects the ego onto the route, reads the route's desired-speed profile (which
-already obeys the limits in force) forward over the horizon and gathers the solve-time
-constants of :func:`twolevel.world.signals.horizon_constants`. The reference ends with a stop
+already obeys the limits in force and slows for bends, :mod:`twolevel.world.speed_profile`)
+forward over the horizon at the scenario's comfort acceleration and deceleration, and gathers
+the solve-time constants of :func:`twolevel.world.signals.horizon_constants`. The reference ends with a stop
 where the plan must stop — the goal, when the route stops there, and a stop line or red light a
 rule guards (:func:`twolevel.control.high_level.guards.stop_lines`) that full braking can still
 stop before. Units: m, rad, m/s, s.
@@ -177,7 +178,7 @@ def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, set
         if not any(sides):
             # approached as a stop line is (settings.stop_decel), more gently than RSS's braking
             gentle = replace(world.settings.response, brake_min=min(world.settings.response.brake_min,
-                                                                     settings.stop_decel))
+                                                                    settings.stop_decel))
             follow = Follow(front.s, front.v, front.offset + world.settings.D_safe, gentle)
     if math.isfinite(s_end) or follow is not None:
         s_ref, v_ref = _reference_to(route, s0, max(float(x0[3]), 0.0), steps, s_end, settings.stop_decel,
