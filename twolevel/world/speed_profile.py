@@ -12,9 +12,11 @@ follow it (:mod:`twolevel.control.high_level.reference`). The profile is the lar
   braking at the comfort deceleration, and leaves it accelerating at the comfort acceleration —
   a backward and a forward pass over v², each a cumulative minimum
   (v_i² ≤ v_j² + 2·decel·(s_j − s_i) for every j ahead of i);
-* changes its deceleration gradually: the passes' v² is shifted earlier and averaged over
-  ``decel · v_top / jerk`` [m], so that braking builds up over that distance (at most ``jerk``
-  [m/s³] at the top speed) instead of starting at full comfort deceleration.
+* changes its deceleration gradually: where braking begins, the passes' v² is replaced by its
+  mean over ``decel · v_top / jerk`` [m] around that point when lower (a corner rounded from
+  below), so that braking builds up over that distance (at most ``jerk`` [m/s³] at the top
+  speed) instead of starting at full comfort deceleration; stretches of constant speed or
+  constant deceleration, and the arrival at a bend's speed or the goal, stay as they are.
 
 Stop lines and lights are not in it: whether the ego must stop there depends on the time and on
 what it knows then, so the reference adds them per step (:mod:`twolevel.control.high_level.reference`).
@@ -57,19 +59,14 @@ def bend_speed(kappa: np.ndarray, lat_accel: float) -> np.ndarray:
     return np.where(k > KAPPA_MIN, np.sqrt(lat_accel / np.maximum(k, KAPPA_MIN)), np.inf)
 
 
-def _window_min(x: np.ndarray, n: int) -> np.ndarray:
-    """out[i] = min(x[i : i+n]) (the window clipped at the end)."""
-    if n <= 1:
+def _centred_mean(x: np.ndarray, n: int) -> np.ndarray:
+    """out[i] = mean(x[i−n//2 : i+n//2+1]) (``n`` odd), ``x`` extended linearly beyond its ends
+    (so that a linear stretch, up to the ends, is its own mean)."""
+    h = n // 2
+    if h == 0 or len(x) < 2:
         return x
-    padded = np.concatenate([x, np.full(n - 1, x[-1])])
-    return np.lib.stride_tricks.sliding_window_view(padded, n).min(axis=1)
-
-
-def _trailing_mean(x: np.ndarray, n: int) -> np.ndarray:
-    """out[i] = mean(x[i−n+1 : i+1]) (the window clipped at the start)."""
-    if n <= 1:
-        return x
-    padded = np.concatenate([np.full(n - 1, x[0]), x])
+    k = np.arange(1, h + 1, dtype=float)
+    padded = np.concatenate([x[0] - (x[1] - x[0]) * k[::-1], x, x[-1] + (x[-1] - x[-2]) * k])
     c = np.concatenate([[0.0], np.cumsum(padded)])
     return (c[n:] - c[:-n]) / n
 
@@ -98,10 +95,12 @@ def speed_profile(s: np.ndarray, cap: np.ndarray, kappa: np.ndarray, comfort: Co
     back = np.minimum.accumulate((v2 + 2 * comfort.decel * s)[::-1])[::-1] - 2 * comfort.decel * s
     fwd = np.minimum.accumulate(back - 2 * comfort.accel * s) + 2 * comfort.accel * s
     v2 = np.minimum(back, fwd)
-    # braking builds up over `ramp` metres: the bound shifted `ramp` earlier, then averaged over it
+    # braking builds up over `ramp` metres: each corner where braking begins (or acceleration
+    # ends) is rounded from below by the mean over `ramp` around it; straight stretches of v²
+    # (constant speed, constant deceleration) are their own mean and stay as they are
     spacing = float(s[1] - s[0])
     v_top = float(np.sqrt(v2.max()))
     ramp = comfort.decel * v_top / comfort.jerk
-    n = int(math.ceil(ramp / spacing)) + 1 if spacing > 0 else 1
-    v2 = _trailing_mean(_window_min(v2, n), n)
+    n = 2 * int(math.ceil(0.5 * ramp / spacing)) + 1 if spacing > 0 else 1
+    v2 = np.minimum(v2, _centred_mean(v2, n))
     return np.sqrt(np.clip(np.minimum(v2, finite_top ** 2), 0.0, None))
