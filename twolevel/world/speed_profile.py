@@ -40,7 +40,7 @@ class Comfort:
     """The comfort limits of the desired speed: ``accel`` and ``decel`` [m/s²] along the route,
     ``jerk`` [m/s³] (how fast braking builds up), ``lat_accel`` [m/s²] in bends."""
 
-    accel: float = 1.5
+    accel: float = 2.0
     decel: float = 2.0
     jerk: float = 2.0
     lat_accel: float = 2.0
