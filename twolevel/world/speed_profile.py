@@ -7,7 +7,9 @@ follow it (:mod:`twolevel.control.high_level.reference`). The profile is the lar
 
 * keeps every cap: the limit in force, the ego's desired speed, the speed from which it stops
   within its sensing range, and in bends sqrt(a_lat / |κ|), the speed at which the bend's
-  curvature κ [1/m] asks the comfort lateral acceleration a_lat [m/s²];
+  curvature κ [1/m] asks the comfort lateral acceleration a_lat [m/s²], from half a braking
+  ramp (below) before the bend on, so that the car, which follows its reference with a lag,
+  is at the bend's speed when it enters it;
 * reaches each lower cap ahead (a bend, a lower limit, the goal when the route stops there) by
   braking at the comfort deceleration, and leaves it accelerating at the comfort acceleration —
   a backward and a forward pass over v², each a cumulative minimum
@@ -59,6 +61,14 @@ def bend_speed(kappa: np.ndarray, lat_accel: float) -> np.ndarray:
     return np.where(k > KAPPA_MIN, np.sqrt(lat_accel / np.maximum(k, KAPPA_MIN)), np.inf)
 
 
+def _ahead_min(x: np.ndarray, n: int) -> np.ndarray:
+    """out[i] = min(x[i : i+n]) (the window clipped at the end)."""
+    if n <= 1:
+        return x
+    padded = np.concatenate([x, np.full(n - 1, x[-1])])
+    return np.lib.stride_tricks.sliding_window_view(padded, n).min(axis=1)
+
+
 def _centred_mean(x: np.ndarray, n: int) -> np.ndarray:
     """out[i] = mean(x[i−n//2 : i+n//2+1]) (``n`` odd), ``x`` extended linearly beyond its ends
     (so that a linear stretch, up to the ends, is its own mean)."""
@@ -80,10 +90,14 @@ def speed_profile(s: np.ndarray, cap: np.ndarray, kappa: np.ndarray, comfort: Co
     None: no constraint). Never above ``cap`` nor the bend speed, never below 0."""
     s = np.asarray(s, dtype=float)
     top = np.minimum(np.asarray(cap, dtype=float), np.inf)
+    spacing = float(s[1] - s[0]) if len(s) >= 2 else 0.0
     if len(s) >= 2:
-        bend = bend_speed(kappa, comfort.lat_accel)
-        top = np.minimum(top, np.concatenate([bend, [np.inf]]))
-        top = np.minimum(top, np.concatenate([[np.inf], bend]))
+        bend = np.concatenate([bend_speed(kappa, comfort.lat_accel), [np.inf]])
+        bend = np.minimum(bend, np.concatenate([[np.inf], bend[:-1]]))
+        # a bend's speed is reached half a braking ramp before it (the car tracks with a lag)
+        v_fast = float(np.max(top[np.isfinite(top)], initial=0.0))  # [m/s] the fastest the route allows
+        lead = 0.5 * comfort.decel * v_fast / comfort.jerk
+        top = np.minimum(top, _ahead_min(bend, int(math.ceil(lead / spacing)) + 1 if spacing > 0 else 1))
     if v_end is not None:
         top[-1] = min(top[-1], max(v_end, 0.0))
     top = np.maximum(top, 0.0)
@@ -98,7 +112,6 @@ def speed_profile(s: np.ndarray, cap: np.ndarray, kappa: np.ndarray, comfort: Co
     # braking builds up over `ramp` metres: each corner where braking begins (or acceleration
     # ends) is rounded from below by the mean over `ramp` around it; straight stretches of v²
     # (constant speed, constant deceleration) are their own mean and stay as they are
-    spacing = float(s[1] - s[0])
     v_top = float(np.sqrt(v2.max()))
     ramp = comfort.decel * v_top / comfort.jerk
     n = 2 * int(math.ceil(0.5 * ramp / spacing)) + 1 if spacing > 0 else 1
