@@ -37,7 +37,11 @@ def test_shipped_tree_is_clean() -> None:
     res = run("check", str(ROOT / "rules"), str(ROOT / "maps"), str(ROOT / "scenarios"), str(ex / "scenario"), "-f", "json")
     payload = json.loads(res.stdout)
     assert res.exit_code == 0, res.stdout
-    assert payload["diagnostics"] == [] and payload["files_checked"] == len(list((ROOT / "rules").glob("*.stl"))) + len(list((ROOT / "maps").glob("*.yaml"))) + len(list((ROOT / "scenarios").rglob("*.yaml"))) + 2
+    # the everyday suite's bends too fast for their limits are warned about, by design (YML432)
+    found = sorted((d["code"], Path(d["file"]).name, d["line"]) for d in payload["diagnostics"])
+    bends = [("YML432", "fast_bend.yaml", 12)] + [("YML432", "mountain.yaml", n) for n in (12, 14, 16, 18, 20)]
+    assert found == sorted(bends + [("YML432", "sharp_left.yaml", 28)]), payload["diagnostics"]
+    assert payload["files_checked"] == len(list((ROOT / "rules").glob("*.stl"))) + len(list((ROOT / "maps").glob("*.yaml"))) + len(list((ROOT / "scenarios").rglob("*.yaml"))) + 2
 
 
 def test_exit_codes(files: dict[str, Path]) -> None:
