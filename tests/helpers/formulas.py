@@ -1,4 +1,6 @@
-"""Hypothesis strategies: random formulas over the signals x, y, z and random signals.
+"""Hypothesis strategies: random formulas over the signals x, y, z and random signals; random
+quantified formulas (``forall``/``exists o in vehicles``) whose bodies also read the participant
+signals p(o), q(o), and traces of the participants a, b, c present at random samples.
 
 Values come from a small grid so that ties (the corner cases of min/max windows) are common.
 ``rtamt_safe`` keeps to what RTAMT 0.4.10 computes and parses correctly: no true/false literal,
@@ -27,11 +29,31 @@ def traces(min_size: int = 0, max_size: int = 14) -> st.SearchStrategy[dict[str,
     return st.integers(min_size, max_size).flatmap(signals)
 
 
-def _terms() -> st.SearchStrategy[A.Node]:
-    leaf = st.one_of(
-        st.sampled_from(SIGNALS).map(A.Var),
-        st.sampled_from([-1.0, 0.0, 0.5, 2.0]).map(A.Num),
-    )
+PARTICIPANTS = ("a", "b", "c")
+PARTICIPANT_SIGNALS = ("p", "q")
+
+
+def participant_traces(min_size: int = 0, max_size: int = 14) -> st.SearchStrategy[dict[str, np.ndarray]]:
+    """x, y, z and, for each of a, b, c, ``present[·]`` (+inf/-inf) and ``p[·]``, ``q[·]``; a
+    participant may be present nowhere (``none`` leaves every one out)."""
+    def of(n: int) -> st.SearchStrategy[dict[str, np.ndarray]]:
+        col = st.lists(VALUES, min_size=n, max_size=n).map(lambda v: np.array(v, dtype=np.float64))
+        pres = st.lists(st.booleans(), min_size=n, max_size=n).map(
+            lambda b: np.where(np.array(b, dtype=bool), np.inf, -np.inf).astype(np.float64))
+        names = {k: col for k in SIGNALS}
+        for pid in PARTICIPANTS:
+            names[f"present[{pid}]"] = pres
+            names.update({f"{s}[{pid}]": col for s in PARTICIPANT_SIGNALS})
+        every = st.fixed_dictionaries(names)
+        return st.one_of(every, every.map(lambda d: {k: v for k, v in d.items() if k in SIGNALS}))
+    return st.integers(min_size, max_size).flatmap(of)
+
+
+def _terms(participant: bool = False) -> st.SearchStrategy[A.Node]:
+    leaves = [st.sampled_from(SIGNALS).map(A.Var), st.sampled_from([-1.0, 0.0, 0.5, 2.0]).map(A.Num)]
+    if participant:
+        leaves.append(st.sampled_from(PARTICIPANT_SIGNALS).map(lambda n: A.ParticipantSignal(n, "o")))
+    leaf = st.one_of(*leaves)
 
     def grow(inner: st.SearchStrategy[A.Node]) -> st.SearchStrategy[A.Node]:
         return st.one_of(
@@ -44,8 +66,9 @@ def _terms() -> st.SearchStrategy[A.Node]:
     return st.recursive(leaf, grow, max_leaves=3)
 
 
-def predicates() -> st.SearchStrategy[A.Node]:
-    return st.builds(A.Compare, st.sampled_from(["<", "<=", ">", ">=", "==", "!=="]), _terms(), _terms())
+def predicates(participant: bool = False) -> st.SearchStrategy[A.Node]:
+    return st.builds(A.Compare, st.sampled_from(["<", "<=", ">", ">=", "==", "!=="]), _terms(participant),
+                     _terms(participant))
 
 
 def intervals(scale: float) -> st.SearchStrategy[A.Interval]:
@@ -54,9 +77,11 @@ def intervals(scale: float) -> st.SearchStrategy[A.Interval]:
     )
 
 
-def formulas(*, scale: float = 1.0, bounded: bool = False, rtamt_safe: bool = False, max_leaves: int = 6) -> st.SearchStrategy[A.Node]:
-    """Random formulas; intervals are multiples of ``scale`` [s] (use the trace's dt)."""
-    atom = predicates()
+def formulas(*, scale: float = 1.0, bounded: bool = False, rtamt_safe: bool = False, max_leaves: int = 6,
+             participant: bool = False) -> st.SearchStrategy[A.Node]:
+    """Random formulas; intervals are multiples of ``scale`` [s] (use the trace's dt).
+    ``participant``: predicates may read p(o), q(o) (a quantifier's body)."""
+    atom = predicates(participant)
     leaves = [atom, atom]
     if not rtamt_safe:
         leaves.append(st.sampled_from(SIGNALS).map(A.Var))
@@ -83,3 +108,23 @@ def formulas(*, scale: float = 1.0, bounded: bool = False, rtamt_safe: bool = Fa
         )
 
     return st.recursive(base, grow, max_leaves=max_leaves)
+
+
+def quantified_formulas(*, scale: float = 1.0, bounded: bool = False, rtamt_safe: bool = False,
+                        max_leaves: int = 4) -> st.SearchStrategy[A.Node]:
+    """Random formulas with quantifiers over the participants (one level: no quantifier inside
+    another), under and around temporal operators."""
+    body = formulas(scale=scale, bounded=bounded, rtamt_safe=rtamt_safe, max_leaves=max_leaves, participant=True)
+    quant = st.builds(A.Quantifier, st.sampled_from(["forall", "exists"]), st.just("o"), st.just("vehicles"), body)
+    outer = formulas(scale=scale, bounded=bounded, rtamt_safe=rtamt_safe, max_leaves=2)
+    ivals = intervals(scale)
+
+    def grow(inner: st.SearchStrategy[A.Node]) -> st.SearchStrategy[A.Node]:
+        return st.one_of(
+            st.builds(A.Not, inner),
+            st.builds(A.Binary, st.sampled_from(["and", "or", "implies"]), inner, st.one_of(inner, outer)),
+            st.builds(A.Temporal, st.sampled_from(["always", "eventually", "historically", "once"]), ivals, inner),
+            st.builds(A.BinTemporal, st.sampled_from(["until", "since"]), ivals, inner, outer),
+        )
+
+    return st.recursive(quant, grow, max_leaves=3)

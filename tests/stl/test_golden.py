@@ -1,7 +1,7 @@
 """Golden diagnostics: every code of twolevel.stl.codes, with its position, never a traceback.
 
 Each ``golden/*.stl`` starts with ``// expect: CODE@line:col, ...`` (the exact multiset of
-findings) and may say ``// options: dt=0.1 horizon=10 provided=v,x``. Inputs that cannot live
+findings) and may say ``// options: dt=0.1 horizon=10 provided=v,x participants=d_lon``. Inputs that cannot live
 in the repository (binary, invalid UTF-8, 10 MB, 10,000 nested parentheses, FIFOs) are generated
 into ``tmp_path``.
 """
@@ -37,6 +37,8 @@ def _expectations(text: str) -> tuple[list[str], dict]:
             kw["horizon"] = int(opts["horizon"])
         if "provided" in opts:
             kw["provided_signals"] = frozenset(opts["provided"].split(","))
+        if "participants" in opts:
+            kw["participant_signals"] = frozenset(opts["participants"].split(","))
     return expected, kw
 
 

@@ -7,8 +7,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from twolevel.stl.ast import (
-    Abs, Arith, BinTemporal, Binary, BoolConst, Call, Compare, Declaration, Edge, Interval, Neg, Not, Num, Rule,
-    RuleFile, Temporal, Var,
+    Abs, Arith, BinTemporal, Binary, BoolConst, Call, Compare, Declaration, Edge, Interval, Neg, Not, Num,
+    ParticipantSignal, Quantifier, Rule, RuleFile, Temporal, Var,
 )
 from twolevel.stl.parser import parse
 from twolevel.stl.printer import format_file, format_formula
@@ -81,6 +81,46 @@ def test_parse_print_parse(fs: list) -> None:
     # the printer's parentheses keep the text free of precedence/portability warnings
     _, more = typecheck(back)
     assert not [d for d in more if d.code.startswith("STL3")], (text, [d.message for d in more])
+
+
+participant_terms = st.recursive(
+    st.one_of(numbers.map(Num), names.map(Var),
+              st.sampled_from(["d_lon", "v", "cut_in"]).map(lambda n: ParticipantSignal(n, "o"))),
+    lambda t: st.one_of(st.builds(Neg, t), st.builds(Arith, st.sampled_from(["+", "-", "*", "/"]), t, t)),
+    max_leaves=4,
+)
+participant_atoms = st.one_of(
+    st.builds(Compare, st.sampled_from(["<", "<=", ">", ">="]), participant_terms, participant_terms),
+    st.sampled_from(["in_same_lane", "precedes"]).map(lambda n: ParticipantSignal(n, "o")),
+    atoms,
+)
+quantified = st.builds(Quantifier, st.sampled_from(["forall", "exists"]), st.just("o"), st.just("vehicles"),
+                       st.recursive(participant_atoms, _extend, max_leaves=5))
+
+
+@pytest.mark.filterwarnings("ignore::hypothesis.errors.HypothesisWarning")
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.recursive(quantified, _extend, max_leaves=3), min_size=1, max_size=2))
+def test_quantified_formulas_round_trip(fs: list) -> None:
+    """Quantifiers and participant signals print as text that parses back to the same tree,
+    without style warnings."""
+    rf = _file(fs)
+    text = format_file(rf)
+    back, diags = parse(text, "gen.stl")
+    assert back is not None, (text, [d.message for d in diags])
+    assert back == rf, text
+    assert format_file(back) == text
+    _, more = typecheck(back)
+    assert not [d for d in more if d.code.startswith("STL3")], (text, [d.message for d in more])
+
+
+def test_commonroad_spelling_reads_as_the_long_form() -> None:
+    """CommonRoad's ``A a1:`` / ``E a1:`` are ``forall``/``exists`` over vehicles."""
+    short, _ = parse("r = A a1: (in_same_lane(a1)) -> E a2: (d_lon(a2) > 0);", "s.stl")
+    long, _ = parse("r = (forall a1 in vehicles: in_same_lane(a1)) -> exists a2 in vehicles: d_lon(a2) > 0;",
+                    "l.stl")
+    assert short is not None and short == long
+    assert isinstance(short.rules[0].formula.left, Quantifier)
 
 
 @settings(max_examples=200, deadline=None)

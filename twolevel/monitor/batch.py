@@ -50,7 +50,7 @@ class BatchEvaluator(ArrayEvaluator):
 
     def run(self, root: ast.Node) -> np.ndarray:
         with np.errstate(all="ignore"):  # a candidate's overflow is a value, not a warning
-            return np.array(ast.fold(root, self.apply), dtype=np.float64)
+            return np.array(super().run(root), dtype=np.float64)
 
 
 def robustness_batch(

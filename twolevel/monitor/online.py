@@ -20,6 +20,10 @@ independent of window lengths.
 
 Unbounded future operators (``always`` without a bound, ``until`` without one) cannot run online
 and are rejected with :class:`~twolevel.monitor.errors.MonitorError`; past ones are fine.
+
+Quantifiers over participants are expanded over the ``participants`` the monitor is given
+(:func:`~twolevel.stl.analysis.expand_quantifiers`): each sample then carries every one's
+``present[p]`` (+inf/-inf) and the signals ``name[p]`` the rules read.
 """
 
 from __future__ import annotations
@@ -35,6 +39,7 @@ from twolevel.monitor import stream as st
 from twolevel.monitor.errors import MonitorError
 from twolevel.monitor.robustness import DEFAULT_BUILTINS, Builtin
 from twolevel.stl import ast
+from twolevel.stl.analysis import expand_quantifiers, quantifies
 
 __all__ = ["OnlineMonitor", "Verdict"]
 
@@ -255,18 +260,30 @@ def _generate(slots: list[_Slot], namespace: dict[str, Any], roots: list[tuple[s
     return ns["step"]
 
 
-def _as_rules(spec: Sequence[ast.Rule] | ast.RuleFile | ast.Node) -> tuple[ast.Rule, ...]:
+def _as_rules(spec: Sequence[ast.Rule] | ast.RuleFile | ast.Node,
+              participants: Sequence[str] | None) -> tuple[ast.Rule, ...]:
     if isinstance(spec, ast.RuleFile):
-        return spec.rules
-    if isinstance(spec, ast.Rule):
-        return (spec,)
-    if isinstance(spec, ast.Node):
-        return (ast.Rule(name="formula", formula=spec),)
-    return tuple(spec)
+        rules = spec.rules
+    elif isinstance(spec, ast.Rule):
+        rules = (spec,)
+    elif isinstance(spec, ast.Node):
+        rules = (ast.Rule(name="formula", formula=spec),)
+    else:
+        rules = tuple(spec)
+    out = []
+    for r in rules:
+        if quantifies(r.formula):
+            if participants is None:
+                raise MonitorError(f"rule '{r.name}' quantifies over participants: give the monitor their ids "
+                                   "(participants=...)", r.name)
+            r = ast.Rule(r.name, expand_quantifiers(r.formula, participants), name_span=r.name_span, span=r.span)
+        out.append(r)
+    return tuple(out)
 
 
 class OnlineMonitor:
-    """Monitor rules (or one formula, named ``"formula"``) sample by sample at period ``dt`` [s]."""
+    """Monitor rules (or one formula, named ``"formula"``) sample by sample at period ``dt`` [s];
+    ``participants``: the ids quantifiers range over (needed when a rule quantifies)."""
 
     def __init__(
         self,
@@ -275,6 +292,7 @@ class OnlineMonitor:
         *,
         consts: Mapping[str, float] | None = None,
         builtins: Mapping[str, Builtin] | None = None,
+        participants: Sequence[str] | None = None,
     ) -> None:
         if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
             raise MonitorError(f"the sampling period dt must be a positive number of seconds, got {dt!r}", "dt")
@@ -282,7 +300,7 @@ class OnlineMonitor:
         comp = _Compiler(self.dt, consts or {}, DEFAULT_BUILTINS if builtins is None else builtins)
         roots: list[tuple[str, int]] = []
         try:
-            for rule in _as_rules(rules):
+            for rule in _as_rules(rules, participants):
                 root = comp.formula(rule.formula)
                 comp.rules[rule.name] = root
                 roots.append((rule.name, root))

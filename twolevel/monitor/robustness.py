@@ -14,20 +14,27 @@ evaluate``) for every operator of the rule language, over whole numpy arrays:
 * ``l unless[a,b] r`` = ``always[0,b] l or (l until[a,b] r)`` (RTAMT's rewriting);
 * ``next``: ``x[i+1]``, ``+inf`` at the last sample; ``prev``: ``x[i-1]``, ``+inf`` at the first;
 * ``rise``: ``min(x[i], -x[i-1])`` with ``x[-1] = -inf``; ``fall``: ``min(-x[i], x[i-1])`` with
-  ``x[-1] = +inf``.
+  ``x[-1] = +inf``;
+* ``forall o in vehicles: body`` at ``i``: the minimum over the participants p present at ``i``
+  (``present[p] > 0``) of the body's robustness at ``i`` with ``d_lon(o)`` read from the signal
+  ``d_lon[p]``, +inf when none is present; ``exists``: the maximum, -inf when none is — exactly
+  :func:`twolevel.stl.analysis.expand_quantifiers`. The participants are those whose presence
+  ``present[p]`` the trace holds; the body is evaluated for all of them at once, over arrays
+  with a participant axis before time.
 
 Intervals are in seconds and cover the samples ``round(a/dt) .. round(b/dt)``.
 """
 
 from __future__ import annotations
 
-from typing import Callable, Mapping, Sequence
+from typing import Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 
 from twolevel.monitor import windows
 from twolevel.monitor.errors import MonitorError
 from twolevel.stl import ast
+from twolevel.stl.analysis import PRESENT, participant_key, participants_in
 
 __all__ = [
     "Builtin",
@@ -129,7 +136,23 @@ class ArrayEvaluator:
 
     # -- evaluation (iterative post-order: deep formulas do not hit the recursion limit) ------
     def run(self, root: ast.Node) -> np.ndarray:
-        return ast.fold(root, self.apply)
+        return ast.fold(root, self.apply, leaves=(ast.Quantifier,))
+
+    def quantify(self, node: ast.Quantifier) -> np.ndarray:
+        """``forall``/``exists`` over the participants whose ``present[p]`` the signals hold: the
+        body evaluated once over arrays with a participant axis before time (see the module
+        docstring), then the minimum or maximum over it where each participant is present."""
+        forall = node.op == "forall"
+        pids = participants_in(self.signals)
+        if not pids:
+            return self.full(np.inf if forall else -np.inf)
+        inner = _Bound(self, node.var, pids)
+        body = np.asarray(inner.run(node.body), dtype=np.float64)
+        with np.errstate(invalid="ignore"):
+            present = np.where(inner.stacked(PRESENT) > 0, np.inf, -np.inf)
+            if forall:
+                return np.min(np.maximum(-present, body), axis=-2)
+            return np.max(np.minimum(present, body), axis=-2)
 
     def apply(self, node: ast.Node, args: list[np.ndarray]) -> np.ndarray:  # noqa: C901 - a dispatch table
         if isinstance(node, ast.Num):
@@ -193,7 +216,14 @@ class ArrayEvaluator:
                 raise MonitorError(f"unknown built-in predicate '{node.name}'", node.name)
             out = np.asarray(fn(self.signals, *args), dtype=np.float64)
             return np.broadcast_to(out, self.shape).copy()
+        if isinstance(node, ast.Quantifier):
+            return self.quantify(node)
+        if isinstance(node, ast.ParticipantSignal):
+            return self.participant_signal(node)
         raise MonitorError(f"cannot evaluate a {type(node).__name__} node", type(node).__name__)
+
+    def participant_signal(self, node: ast.ParticipantSignal) -> np.ndarray:
+        raise MonitorError(f"'{node.name}({node.var})' is read outside a quantifier that binds '{node.var}'", node.var)
 
     def temporal(self, node: ast.Temporal, x: np.ndarray) -> np.ndarray:
         op = node.op
@@ -218,6 +248,63 @@ class ArrayEvaluator:
             return windows.since(left, right, a, b)
         held = windows.future_window(left, 0, b, "min")  # unless
         return np.maximum(held, windows.until(left, right, a, b))
+
+
+class _Broadcast(Mapping[str, np.ndarray]):
+    """An evaluator's signals seen from inside a quantifier: each with an axis for the
+    participants inserted before time (length 1, broadcast)."""
+
+    def __init__(self, signals: Mapping[str, np.ndarray], shape: tuple[int, ...]) -> None:
+        self._signals, self._shape = signals, shape
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        return np.broadcast_to(np.asarray(self._signals[name])[..., None, :], self._shape)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._signals)
+
+    def __len__(self) -> int:
+        return len(self._signals)
+
+
+class _Bound(ArrayEvaluator):
+    """The evaluation of a quantifier's body: every value has the outer evaluator's shape with
+    the participants ``pids`` as an axis before time; ``var(o)``'s signals are the stacked
+    columns ``name[p]``, everything else is the outer evaluator's, broadcast."""
+
+    def __init__(self, outer: ArrayEvaluator, var: str, pids: Sequence[str]) -> None:
+        self.outer, self.var, self.pids = outer, var, tuple(pids)
+        self.n, self.dt = outer.n, outer.dt
+        self.shape = outer.shape[:-1] + (len(self.pids), outer.shape[-1])
+        self.signals = _Broadcast(outer.signals, self.shape)
+        self.rules = _Broadcast(outer.rules, self.shape)
+        self.consts, self.builtins = outer.consts, outer.builtins
+        self._stacks: dict[str, np.ndarray] = {}
+
+    def full(self, value: float) -> np.ndarray:
+        return np.full(self.shape, value)
+
+    def stacked(self, name: str) -> np.ndarray:
+        """Participant signal ``name`` of every participant, stacked along the participant axis."""
+        hit = self._stacks.get(name)
+        if hit is None:
+            try:
+                cols = [np.broadcast_to(np.asarray(self.outer.signals[participant_key(name, p)], dtype=np.float64),
+                                        self.outer.shape) for p in self.pids]
+            except KeyError as exc:
+                raise MonitorError(f"no signal '{exc.args[0]}': every participant present needs its "
+                                   f"'{name}' column", str(exc.args[0])) from None
+            hit = self._stacks[name] = np.stack(cols, axis=-2)
+        return hit
+
+    def participant_signal(self, node: ast.ParticipantSignal) -> np.ndarray:
+        if node.var != self.var:
+            return super().participant_signal(node)
+        return self.stacked(node.name)
+
+    def quantify(self, node: ast.Quantifier) -> np.ndarray:
+        raise MonitorError(f"a quantifier over '{node.var}' inside the quantifier over '{self.var}' is not supported",
+                           node.var)
 
 
 def robustness(

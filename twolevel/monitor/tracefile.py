@@ -1,7 +1,9 @@
 """Recorded drives as CSV: reading them, and monitoring rules over them (``twolevel monitor``).
 
 A trace CSV has a header row, a time column ``t`` (or ``time``) in seconds and one column per
-signal [SI units]; each further row is one sample. The time column must increase strictly and be
+signal [SI units]; each further row is one sample. The participants quantifiers range over are
+those with a column ``present[ID]`` (> 0 where participant ID is present); participant ID's
+signal NAME is the column ``NAME[ID]`` (:func:`twolevel.stl.analysis.participant_key`). The time column must increase strictly and be
 uniform (spacing within 1 % of its median) unless a period ``dt`` is given, which then decides
 (and makes the time column optional: sample ``k`` is at ``k * dt``). Every problem is a
 :class:`~twolevel.diagnostics.Diagnostic` with the file, line and column, never an exception.
@@ -34,11 +36,11 @@ import numpy as np
 
 from twolevel.diagnostics import Diagnostic, Severity, Span
 from twolevel.files import open_regular
-from twolevel.monitor.codes import SIM601, SIM602, SIM603, SIM604, SIM605, SIM606, SIM607, SIM608
+from twolevel.monitor.codes import SIM601, SIM602, SIM603, SIM604, SIM605, SIM606, SIM607, SIM608, SIM609
 from twolevel.monitor.errors import MonitorError
 from twolevel.monitor.robustness import DEFAULT_BUILTINS, Builtin, TraceEvaluator
 from twolevel.stl import ast
-from twolevel.stl.analysis import fold_term
+from twolevel.stl.analysis import PRESENT, fold_term, participant_key, participants_in, quantifies
 
 __all__ = [
     "Trace",
@@ -414,6 +416,9 @@ def read_trace(path: str | os.PathLike[str], *, dt: float | None = None) -> tupl
     assert dt is not None
     for name in unusable:
         columns.pop(name, None)
+    for pid in participants_in(columns):  # presence as a robustness: +inf where present (> 0), else -inf
+        key = participant_key(PRESENT, pid)
+        columns[key] = np.where(columns[key] > 0, np.inf, -np.inf)
     return Trace(path, t, columns, float(dt), unusable), diags
 
 
@@ -431,11 +436,23 @@ def consts_of(rule_file: ast.RuleFile) -> dict[str, float]:
     return out
 
 
-def _reads(formula: ast.Node, skip: set[str]) -> list[ast.Var | ast.Call]:
-    """The signal reads of a formula (Vars not in ``skip``, built-in calls), in source order."""
+def _reads(formula: ast.Node, skip: set[str]) -> list[ast.Var | ast.Call | ast.ParticipantSignal]:
+    """The signal reads of a formula (Vars not in ``skip``, built-in calls, participant signals),
+    in source order."""
     return [
-        n for n in formula.walk() if (isinstance(n, ast.Var) and n.name not in skip) or isinstance(n, ast.Call)
+        n for n in formula.walk()
+        if (isinstance(n, ast.Var) and n.name not in skip) or isinstance(n, (ast.Call, ast.ParticipantSignal))
     ]
+
+
+def _columns_read(node: ast.Var | ast.Call | ast.ParticipantSignal, pids: Sequence[str]) -> list[str]:
+    """The trace columns a signal read needs: the signal's, a built-in's, or the participant
+    signal's column of every participant."""
+    if isinstance(node, ast.Var):
+        return [node.name]
+    if isinstance(node, ast.ParticipantSignal):
+        return [participant_key(node.name, p) for p in pids]
+    return list(BUILTIN_SIGNALS.get(node.name, ()))
 
 
 def _listed(names: Sequence[str], most: int = 20) -> str:
@@ -478,6 +495,7 @@ def monitor_trace(
         return MonitorReport(trace.path, trace.dt, 0, ()), diags
     hints: dict[str, str] = {}
     skip = set(consts) | {r.name for r in rules}  # once: per rule it made R rules cost O(R²)
+    pids = participants_in(trace.columns)
     evaluator: TraceEvaluator | MonitorError
     try:
         evaluator = TraceEvaluator(trace.columns, trace.dt, consts=consts, builtins=builtins)
@@ -485,9 +503,14 @@ def monitor_trace(
         evaluator = exc
     for rule in rules:
         missing = []
+        if not pids and quantifies(rule.formula):
+            diags.append(SIM609(
+                f"rule '{rule.name}' quantifies over participants, but the trace has no column "
+                f"{participant_key(PRESENT, 'ID')}: with no participant its quantifiers are vacuous",
+                rule.name_span or rule.span or whole,
+                hint="record each participant's presence (+inf or 1 where present) and its signals NAME[ID]"))
         for node in _reads(rule.formula, skip):
-            names = [node.name] if isinstance(node, ast.Var) else list(BUILTIN_SIGNALS.get(node.name, ()))
-            for name in names:
+            for name in _columns_read(node, pids):
                 if name in trace.unusable and name not in missing:
                     missing.append(name)
                     bad = trace.unusable[name]

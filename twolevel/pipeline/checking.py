@@ -86,8 +86,9 @@ def check(paths: Sequence[str], *, dt: float | None = None, horizon: int | None 
     for file in files:
         if file.endswith(RULE_SUFFIXES):
             from twolevel.stl.lint import check_file
+            from twolevel.world.provided import PROVIDED_PARTICIPANT_SIGNALS
 
-            result = check_file(file, dt=dt, horizon=horizon)
+            result = check_file(file, dt=dt, horizon=horizon, participant_signals=PROVIDED_PARTICIPANT_SIGNALS)
             diags.extend(result.diagnostics)
             if result.source is not None:
                 sources[file] = result.source

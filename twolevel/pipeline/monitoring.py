@@ -43,15 +43,16 @@ def monitor(
     constants; ``dt`` [s] overrides the period read from the time column."""
     from twolevel.monitor.tracefile import monitor_trace, read_trace
     from twolevel.stl.lint import load_ruleset
+    from twolevel.world.provided import PROVIDED_PARTICIPANT_SIGNALS as participants
 
     trace, diags = read_trace(trace_path, dt=dt)
     sources = {rules_path: read_text_quietly(rules_path)}
     if trace is None or any(d.is_error for d in diags):
-        ruleset, rule_diags = load_ruleset(rules_path, consts)  # still report the rule file's findings
+        ruleset, rule_diags = load_ruleset(rules_path, consts, participant_signals=participants)  # its findings too
         return MonitorResult(None, tuple(rule_diags + diags), sources)
     # the trace's period decides the windows: an interval that is not a multiple of it (STL209)
     # would be silently rounded to whole samples
-    ruleset, rule_diags = load_ruleset(rules_path, consts, dt=trace.dt)
+    ruleset, rule_diags = load_ruleset(rules_path, consts, dt=trace.dt, participant_signals=participants)
     diags = rule_diags + diags
     if ruleset is None:
         return MonitorResult(None, tuple(diags), sources)

@@ -12,7 +12,8 @@ operators, so an inactive rule collapses to ``true`` before the encoder creates 
 from __future__ import annotations
 
 import math
-from typing import Callable, Mapping
+from dataclasses import fields, replace
+from typing import Callable, Iterable, Mapping, Sequence
 
 from twolevel.stl.ast import (
     FUTURE_OPS,
@@ -24,16 +25,26 @@ from twolevel.stl.ast import (
     Call,
     Compare,
     Edge,
+    Interval,
     Neg,
     Node,
     Not,
     Num,
+    ParticipantSignal,
+    Quantifier,
     Temporal,
     Var,
     fold,
 )
 
 __all__ = [
+    "PRESENT",
+    "participant_key",
+    "split_participant_key",
+    "participants_in",
+    "expand_quantifiers",
+    "quantifies",
+    "participant_signals_read",
     "signals_read",
     "future_horizon",
     "past_depth",
@@ -48,9 +59,116 @@ __all__ = [
 ]
 
 
+# ----------------------------------------------------------------------------- participants
+
+PRESENT = "present"
+"""The participant signal that says where a participant is present: ``present[ID]`` is +inf at
+the samples where it is (within sensing range) and -inf elsewhere, the robustness of "present"."""
+
+
+def participant_key(name: str, pid: str) -> str:
+    """The name of participant ``pid``'s signal ``name`` in a trace, a history or a sample:
+    ``name[pid]`` (``d_lon[car-3]``, ``present[car-3]``)."""
+    return f"{name}[{pid}]"
+
+
+def split_participant_key(key: str) -> tuple[str, str] | None:
+    """``(name, pid)`` of a key ``name[pid]``, or ``None`` for any other name."""
+    i = key.find("[")
+    if i <= 0 or not key.endswith("]") or i == len(key) - 2:
+        return None
+    name = key[:i]
+    return (name, key[i + 1:-1]) if name.isidentifier() else None
+
+
+def participants_in(names: Iterable[str]) -> list[str]:
+    """The participants a set of signal names covers: every ``pid`` of a ``present[pid]``, in
+    the order given (the domain a quantifier ranges over)."""
+    out = []
+    for key in names:
+        got = split_participant_key(key)
+        if got is not None and got[0] == PRESENT:
+            out.append(got[1])
+    return out
+
+
+def _balanced(op: str, parts: list[Node], sp: object) -> Node:
+    """``parts`` joined by ``op`` as a balanced tree (depth log2 of their number)."""
+    while len(parts) > 1:
+        parts = [Binary(op, parts[i], parts[i + 1], span=sp) if i + 1 < len(parts) else parts[i]  # type: ignore[arg-type]
+                 for i in range(0, len(parts), 2)]
+    return parts[0]
+
+
+def _bind_participant(node: Node, var: str, pid: str) -> Node:
+    """``node`` with every signal of participant variable ``var`` read from participant ``pid``'s
+    columns (:func:`participant_key`)."""
+    if isinstance(node, ParticipantSignal):
+        return Var(participant_key(node.name, pid), span=node.span) if node.var == var else node
+    changes: dict[str, object] = {}
+    for f in fields(node):
+        value = getattr(node, f.name)
+        if isinstance(value, Node) and not isinstance(value, Interval):
+            new = _bind_participant(value, var, pid)
+            if new is not value:
+                changes[f.name] = new
+        elif isinstance(value, tuple) and value and isinstance(value[0], Node):
+            new_t = tuple(_bind_participant(v, var, pid) for v in value)
+            if any(a is not b for a, b in zip(new_t, value)):
+                changes[f.name] = new_t
+    return replace(node, **changes) if changes else node
+
+
+def expand_quantifiers(formula: Node, participants: Sequence[str]) -> Node:
+    """``formula`` with every quantifier expanded over ``participants`` (their ids): ``forall o:
+    body`` becomes the conjunction over p of ``present[p] -> body(p)``, ``exists`` the
+    disjunction of ``present[p] and body(p)``, where ``body(p)`` reads ``name[p]`` for each
+    ``name(o)`` (balanced trees; ``true``/``false`` for no participant). This is the quantifiers'
+    meaning in the language without them: the online monitor, the MILC encoding and the tests
+    against RTAMT use it; the offline and batched monitors evaluate quantifiers directly and equal
+    it. A subtree of the body that reads no signal of the participant is shared by every copy
+    (it has the same value in each); the rest is each participant's own (memoising evaluators
+    key on node identity)."""
+    if not any(isinstance(n, Quantifier) for n in formula.walk()):
+        return formula
+    return _expand(formula, tuple(participants))
+
+
+def _expand(node: Node, pids: tuple[str, ...]) -> Node:
+    if isinstance(node, Quantifier):
+        body = _expand(node.body, pids)
+        sp = node.span
+        forall = node.op == "forall"
+        if not pids:
+            return BoolConst(forall, span=sp)
+        parts: list[Node] = [Binary("implies" if forall else "and", Var(participant_key(PRESENT, p), span=sp),
+                                    _bind_participant(body, node.var, p), span=sp) for p in pids]
+        return _balanced("and" if forall else "or", parts, sp)
+    changes: dict[str, object] = {}
+    for f in fields(node):
+        value = getattr(node, f.name)
+        if isinstance(value, Node) and not isinstance(value, Interval):
+            new = _expand(value, pids)
+            if new is not value:
+                changes[f.name] = new
+    return replace(node, **changes) if changes else node
+
+
 def signals_read(formula: Node) -> set[str]:
-    """Every name the formula reads: signals, constants and references to other rules."""
-    return {n.name for n in formula.walk() if isinstance(n, Var)}
+    """Every name the formula reads: signals, constants and references to other rules, and each
+    participant signal as its columns' pattern (``d_lon[*]``, :func:`participant_key`)."""
+    return {n.name for n in formula.walk() if isinstance(n, Var)} | {
+        participant_key(n.name, "*") for n in formula.walk() if isinstance(n, ParticipantSignal)}
+
+
+def participant_signals_read(formula: Node) -> set[str]:
+    """The names of the participant signals the formula reads (``d_lon`` for ``d_lon(o)``)."""
+    return {n.name for n in formula.walk() if isinstance(n, ParticipantSignal)}
+
+
+def quantifies(formula: Node) -> bool:
+    """Whether the formula holds a quantifier over participants."""
+    return any(isinstance(n, Quantifier) for n in formula.walk())
 
 
 def _horizon(node: Node, dt: float, refs: Mapping[str, float], future: bool) -> float:
@@ -63,6 +181,8 @@ def _horizon(node: Node, dt: float, refs: Mapping[str, float], future: bool) -> 
         return inner + dt if (isinstance(node, Edge) and not future) else inner
     if isinstance(node, Binary):
         return max(rec(node.left), rec(node.right))
+    if isinstance(node, Quantifier):
+        return rec(node.body)
     same = future
     if isinstance(node, Temporal):
         inner = rec(node.operand)
@@ -104,7 +224,8 @@ def past_depth(formula: Node, dt: float = 0.0, refs: Mapping[str, float] | None 
 
 def is_constant(term: Node, constants: frozenset[str] | set[str] = frozenset()) -> bool:
     """True when the term involves only numbers and the named ``constants``."""
-    return all(not isinstance(n, Var) or n.name in constants for n in term.walk())
+    return all(not isinstance(n, ParticipantSignal) and (not isinstance(n, Var) or n.name in constants)
+               for n in term.walk())
 
 
 def nonlinear_nodes(formula: Node, constants: frozenset[str] | set[str] = frozenset()) -> list[Arith]:
@@ -176,8 +297,13 @@ def _fold(node: Node, values: Mapping[str, float], fold_predicates: bool) -> Nod
     sp = node.span
     if isinstance(node, Var):
         return Num(float(values[node.name]), span=sp) if node.name in values else node
-    if isinstance(node, (Num, BoolConst)):
+    if isinstance(node, (Num, BoolConst, ParticipantSignal)):
         return node
+    if isinstance(node, Quantifier):
+        body = rec(node.body)
+        if isinstance(body, BoolConst) and body.value is (node.op == "forall"):
+            return body  # forall: true and exists: false whatever the participants
+        return Quantifier(node.op, node.var, node.domain, body, var_span=node.var_span, span=sp)
     if isinstance(node, Neg):
         inner = term(node.operand)
         return Num(-inner.value, span=sp) if isinstance(inner, Num) else Neg(inner, span=sp)

@@ -8,8 +8,11 @@ Two kinds of nodes:
 * **terms** (real-valued): :class:`Num`, :class:`Var`, :class:`Neg`, :class:`Arith`, :class:`Abs`;
 * **formulas** (robustness-valued): :class:`Compare`, :class:`BoolConst`, :class:`Not`,
   :class:`Binary`, :class:`Temporal`, :class:`BinTemporal`, :class:`Edge`, :class:`Call`
-  (built-in world predicates such as ``collision_free(d)``), and :class:`Var` used as a formula
-  (a reference to an earlier named rule or a signal, whose value is its robustness, as in RTAMT).
+  (built-in world predicates such as ``collision_free(d)``), :class:`Quantifier` (``forall o in
+  vehicles: ...``), and :class:`Var` used as a formula (a reference to an earlier named rule or a
+  signal, whose value is its robustness, as in RTAMT);
+* :class:`ParticipantSignal` (``d_lon(o)``: a signal of the participant a quantifier binds) is,
+  like :class:`Var`, a term and, used as a formula, its robustness.
 
 Time intervals are stored in seconds. Time is discrete: an interval ``[a, b]`` covers the
 samples ``round(a/dt) .. round(b/dt)``.
@@ -101,7 +104,18 @@ class Abs(Node):
         return (self.operand,)
 
 
-Term = Union[Num, Var, Neg, Arith, Abs]
+@dataclass(frozen=True)
+class ParticipantSignal(Node):
+    """``name(var)``: signal ``name`` of the participant bound to ``var`` by an enclosing
+    :class:`Quantifier` (``d_lon(o)``). The world names these signals
+    (:mod:`twolevel.world.provided`); their values over a trace are the columns ``name[ID]``, one
+    per participant (:func:`twolevel.stl.analysis.participant_key`)."""
+
+    name: str
+    var: str
+
+
+Term = Union[Num, Var, Neg, Arith, Abs, ParticipantSignal]
 
 # ----------------------------------------------------------------------------- formulas
 
@@ -219,7 +233,32 @@ class Call(Node):
         return self.args
 
 
-Formula = Union[Compare, BoolConst, Not, Binary, Temporal, BinTemporal, Edge, Call, Var]
+QuantifierOp = Literal["forall", "exists"]
+
+
+@dataclass(frozen=True)
+class Quantifier(Node):
+    """``forall var in domain: body`` and ``exists var in domain: body`` (CommonRoad's
+    ``A var:`` / ``E var:``). At each sample the robustness is the minimum (``forall``) or the
+    maximum (``exists``) of the body's over the participants of ``domain`` present at that
+    sample, +inf (``forall``) or -inf (``exists``) when none is; the body is evaluated over the
+    whole trace of each participant. Exactly: ``forall`` is the conjunction over every participant
+    p of ``present[p] -> body(p)`` and ``exists`` the disjunction of ``present[p] and body(p)``,
+    with ``present[p]`` +inf where p is present and -inf elsewhere
+    (:func:`twolevel.stl.analysis.expand_quantifiers`). ``var_span`` locates the variable."""
+
+    op: QuantifierOp
+    var: str
+    domain: str
+    body: "Formula"
+    var_span: Span | None = field(default=None, compare=False, repr=False)
+
+    def children(self) -> tuple[Node, ...]:
+        return (self.body,)
+
+
+Formula = Union[Compare, BoolConst, Not, Binary, Temporal, BinTemporal, Edge, Call, Var, Quantifier,
+                ParticipantSignal]
 
 # ----------------------------------------------------------------------------- file level
 

@@ -49,6 +49,12 @@ STL220 = Code("STL220", "interval-too-long", E, "An interval longer than any tra
 STL221 = Code("STL221", "division-by-zero", E, "A division whose divisor is the constant 0: the term is infinite or NaN at every sample.")
 STL222 = Code("STL222", "non-finite-constant", E, "A constant whose value (declared or bound) is infinite or NaN.")
 STL223 = Code("STL223", "term-overflow", E, "Arithmetic on constants that overflows: the term is infinite or NaN at every sample.")
+STL224 = Code("STL224", "unknown-domain", E, "A quantifier over a domain the world does not provide (it provides 'vehicles').")
+STL225 = Code("STL225", "participant-signal-call", E, "A participant's signal read without exactly one participant bound by a quantifier.")
+STL226 = Code("STL226", "participant-as-value", E, "A quantified participant used as a number or a formula instead of through one of its signals.")
+STL227 = Code("STL227", "shadowing-variable", E, "A quantified variable named like a declaration, a rule or an enclosing quantifier's variable.")
+STL228 = Code("STL228", "nested-quantifier", E, "A quantifier inside another: participant signals relate one participant to the ego, so nesting is not supported.")
+STL229 = Code("STL229", "unused-quantified-variable", W, "A quantifier whose body reads no signal of its participant: it only asks whether any participant is present.")
 
 # ----------------------------------------------------------------------------- STL3xx style & portability
 STL301 = Code("STL301", "and-or-mix", W, "'and' and 'or' mixed without parentheses; tools disagree on their precedence.")
@@ -61,6 +67,7 @@ ALL: tuple[Code, ...] = (
     STL100, STL101, STL102, STL103, STL104, STL105, STL106, STL107, STL108, STL109, STL110,
     STL201, STL202, STL203, STL204, STL205, STL206, STL207, STL208, STL209, STL210,
     STL211, STL212, STL213, STL214, STL215, STL216, STL217, STL218, STL219, STL220, STL221, STL222, STL223,
+    STL224, STL225, STL226, STL227, STL228, STL229,
     STL301, STL302, STL303, STL304, STL305,
 )
 # STL100 is bad input (the CLI exits 2: usage error); binary, non-UTF-8, oversized or too deeply

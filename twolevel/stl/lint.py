@@ -44,12 +44,14 @@ def check_source(
     dt: float | None = None,
     horizon: int | None = None,
     provided_signals: frozenset[str] | None = None,
+    participant_signals: frozenset[str] | None = None,
 ) -> LintResult:
     """Parse and type-check rule-file ``text`` (``file`` names it in the diagnostics)."""
     rf, diags = parse(text, file)
     rs = None
     if rf is not None:
-        rs, more = typecheck(rf, dt=dt, horizon=horizon, provided_signals=provided_signals)
+        rs, more = typecheck(rf, dt=dt, horizon=horizon, provided_signals=provided_signals,
+                             participant_signals=participant_signals)
         diags = diags + more
     return LintResult(file, text, rf, rs, tuple(sorted(diags, key=sort_key)))
 
@@ -60,12 +62,14 @@ def check_file(
     dt: float | None = None,
     horizon: int | None = None,
     provided_signals: frozenset[str] | None = None,
+    participant_signals: frozenset[str] | None = None,
 ) -> LintResult:
     """Read and check the rule file at ``path``; never raises on bad input."""
     text, diags = read_source(path)
     if text is None:
         return LintResult(path, None, None, None, tuple(diags))
-    return check_source(text, path, dt=dt, horizon=horizon, provided_signals=provided_signals)
+    return check_source(text, path, dt=dt, horizon=horizon, provided_signals=provided_signals,
+                        participant_signals=participant_signals)
 
 
 def load_ruleset(
@@ -74,13 +78,14 @@ def load_ruleset(
     *,
     dt: float | None = None,
     provided_signals: frozenset[str] | None = None,
+    participant_signals: frozenset[str] | None = None,
 ) -> tuple[RuleSet | None, list[Diagnostic]]:
     """The checked rule set of ``path`` with ``consts`` bound, for the monitor and the encoder.
 
     ``None`` when the file has errors, a binding names no constant (STL219), or a constant is
     still unbound (STL217, raised to an error here). Warnings are returned alongside.
     """
-    res = check_file(path, dt=dt, provided_signals=provided_signals)
+    res = check_file(path, dt=dt, provided_signals=provided_signals, participant_signals=participant_signals)
     diags = list(res.diagnostics)
     if res.ruleset is None or not res.ok:
         return None, diags

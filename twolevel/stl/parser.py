@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 import re
+from dataclasses import fields, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -43,6 +44,8 @@ from twolevel.stl.ast import (
     Node,
     Not,
     Num,
+    ParticipantSignal,
+    Quantifier,
     Rule,
     RuleFile,
     Temporal,
@@ -62,8 +65,10 @@ MAX_LEX_ERRORS = 20
 
 TERM_NODES = (Num, Neg, Arith, Abs)
 """Node types that are terms only (a :class:`Var` is both a term and a formula)."""
-FORMULA_NODES = (Compare, BoolConst, Not, Binary, Temporal, BinTemporal, Edge, Call)
-"""Node types that are formulas only."""
+FORMULA_NODES = (Compare, BoolConst, Not, Binary, Temporal, BinTemporal, Edge, Call, Quantifier)
+"""Node types that are formulas only (a :class:`ParticipantSignal`, like a :class:`Var`, is both)."""
+DEFAULT_DOMAIN = "vehicles"
+"""The domain of a quantifier written without ``in DOMAIN`` (CommonRoad's ``A o:``)."""
 
 _GRAMMAR = Path(__file__).with_name("grammar.lark")
 _LARK: "Lark | None" = None
@@ -100,9 +105,10 @@ _TEMPORAL_OPS = {
 }
 _BINTEMP_OPS = {"UNTIL": "until", "U_OP": "until", "UNLESS": "unless", "W_OP": "unless",
                 "SINCE": "since", "S_OP": "since"}
+_QUANT_OPS = {"FORALL": "forall", "A_OP": "forall", "EXISTS": "exists", "E_OP": "exists"}
 _PREFIX = set(_TEMPORAL_OPS) | {"NOT", "BANG"}
 _ARITH_OR_CMP = {"PLUS", "MINUS", "STAR", "SLASH", "LT", "LE", "GT", "GE", "EQEQ", "NEQ"}
-_ATOM_START = {"NUMBER", "NAME", "TRUE", "FALSE", "LPAR", "RISE", "FALL", "ABS", "MINUS"} | _PREFIX
+_ATOM_START = {"NUMBER", "NAME", "TRUE", "FALSE", "LPAR", "RISE", "FALL", "ABS", "MINUS"} | _PREFIX | set(_QUANT_OPS)
 _STARTERS = {"INPUT", "OUTPUT", "CONST", "FLOAT", "INT", "SPECIFICATION", "IMPORT_LINE"}
 _TERM_END = {"NAME", "NUMBER", "RPAR", "TRUE", "FALSE"}
 _WORDS = {
@@ -370,6 +376,8 @@ class _Builder:
         self.diags = diags
         self.parens = parens
         self.too_deep = False
+        self.call_terms: set[int] = set()  # calls used as numbers: participant signals, if bound
+
 
     def build(self, tree: "Tree") -> Any:
         from lark import Tree
@@ -386,6 +394,10 @@ class _Builder:
     # -- checks
     def _term(self, item: tuple[Node, int]) -> bool:
         node = item[0]
+        if isinstance(node, Call) and len(node.args) == 1 and isinstance(node.args[0], Var):
+            # ``d_lon(o)``: a participant's signal when a quantifier binds ``o`` (:meth:`bind`)
+            self.call_terms.add(id(node))
+            return True
         if isinstance(node, FORMULA_NODES):
             self.diags.append(codes.STL206(
                 "a formula cannot be used as a number (in arithmetic, a comparison or a call)",
@@ -520,6 +532,16 @@ class _Builder:
         return self._make(meta, BinTemporal, _BINTEMP_OPS[op.type], interval, left[0], right[0],
                           depth=max(left[1], right[1]) + 1)
 
+    def _quantifier(self, meta: Any, kids: list) -> Any:
+        op, var, body = kids[0], kids[1], kids[-1]
+        if not self._formula(body):
+            return _ERR
+        domain = str(kids[3]) if len(kids) == 6 else DEFAULT_DOMAIN
+        made = self._make(meta, Quantifier, _QUANT_OPS[op.type], str(var), domain, body[0], depth=body[1] + 1)
+        if made is _ERR:
+            return _ERR
+        return (replace(made[0], var_span=_tok_span(self.file, var)), made[1])
+
     def _binary(self, meta: Any, kids: list) -> Any:
         left, op, right = kids
         if not (self._formula(left) & self._formula(right)):
@@ -527,6 +549,37 @@ class _Builder:
         return self._make(meta, Binary, _BOOL_OPS[op.type], left[0], right[0], depth=max(left[1], right[1]) + 1)
 
     # -- statements
+    def bind(self, node: Node, scope: frozenset[str] = frozenset()) -> Node:
+        """``node`` with every call ``name(o)`` whose argument is a participant bound by an
+        enclosing quantifier turned into a :class:`ParticipantSignal`; a call left that was used
+        as a number is reported (STL206)."""
+        if isinstance(node, Call) and len(node.args) == 1 and isinstance(node.args[0], Var):
+            if node.args[0].name in scope:
+                return ParticipantSignal(node.name, node.args[0].name, span=node.span)
+            if id(node) in self.call_terms:
+                arg = node.args[0].name
+                self.diags.append(codes.STL206(
+                    f"'{node.name}({arg})' is used as a number, but no quantifier binds '{arg}': a call is a "
+                    "predicate (a formula) unless it reads a participant's signal",
+                    node.span or Span.whole_file(self.file),
+                    hint=f"read a participant's signal inside a quantifier: forall {arg} in vehicles: "
+                         f"... {node.name}({arg}) ..."))
+            return node
+        if isinstance(node, Quantifier):
+            scope = scope | {node.var}
+        changes: dict[str, Any] = {}
+        for f in fields(node):
+            value = getattr(node, f.name)
+            if isinstance(value, Node) and not isinstance(value, Interval):
+                new = self.bind(value, scope)
+                if new is not value:
+                    changes[f.name] = new
+            elif isinstance(value, tuple) and value and isinstance(value[0], Node):
+                new_t = tuple(self.bind(v, scope) for v in value)
+                if any(a is not b for a, b in zip(new_t, value)):
+                    changes[f.name] = new_t
+        return replace(node, **changes) if changes else node
+
     def _decl_stmt(self, meta: Any, kids: list) -> Any:
         toks = [k for k in kids if not isinstance(k, tuple)]
         kind = toks[0].type.lower() if toks[0].type in ("INPUT", "OUTPUT", "CONST") else "input"
@@ -537,7 +590,7 @@ class _Builder:
         if values:
             if not self._term(values[0]):
                 return _ERR
-            value = values[0][0]
+            value = self.bind(values[0][0])
         span = _node_span(self.file, meta)
         return Declaration(kind, str(type_tok), str(name), value, span=span)  # type: ignore[arg-type]
 
@@ -545,7 +598,8 @@ class _Builder:
         name, formula = kids[0], kids[2]
         if not self._formula(formula):
             return _ERR
-        return Rule(str(name), formula[0], name_span=_tok_span(self.file, name), span=_node_span(self.file, meta))
+        return Rule(str(name), self.bind(formula[0]), name_span=_tok_span(self.file, name),
+                    span=_node_span(self.file, meta))
 
     def _spec_stmt(self, meta: Any, kids: list) -> Any:
         return None  # `specification NAME`: RTAMT's spec name, ignored

@@ -31,6 +31,8 @@ from twolevel.stl.ast import (
     Node,
     Not,
     Num,
+    ParticipantSignal,
+    Quantifier,
     Rule,
     RuleFile,
     Temporal,
@@ -75,7 +77,7 @@ def _level(node: Node) -> int:
         return _BIN_LEVEL[node.op]
     if isinstance(node, BinTemporal):
         return _UNTIL
-    if isinstance(node, (Compare, Temporal, Not)):
+    if isinstance(node, (Compare, Temporal, Not, Quantifier)):
         return _CMP
     if isinstance(node, Arith):
         return _SUM if node.op in "+-" else _PROD
@@ -94,7 +96,7 @@ def _fmt(node: Node, need: int, left_of_op: bool, clear: bool = True) -> str:
     read as covering it, STL304), so a prefix node gets parentheses (with ``clear``).
     """
     level = _level(node)
-    prefix = isinstance(node, (Temporal, Not))
+    prefix = isinstance(node, (Temporal, Not, Quantifier))
     if level < need or (prefix and left_of_op and clear):
         return "(" + _fmt(node, 0, False, clear) + ")"
     if isinstance(node, Num):
@@ -105,6 +107,10 @@ def _fmt(node: Node, need: int, left_of_op: bool, clear: bool = True) -> str:
         return "true" if node.value else "false"
     if isinstance(node, Call):
         return f"{node.name}({', '.join(_fmt(a, 0, False, clear) for a in node.args)})"
+    if isinstance(node, ParticipantSignal):
+        return f"{node.name}({node.var})"
+    if isinstance(node, Quantifier):
+        return f"{node.op} {node.var} in {node.domain}: " + _fmt(node.body, _CMP, False, clear)
     if isinstance(node, Abs):
         return f"abs({_fmt(node.operand, 0, False, clear)})"
     if isinstance(node, Edge):

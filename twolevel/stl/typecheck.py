@@ -36,13 +36,16 @@ from twolevel.stl.ast import (
     Node,
     Not,
     Num,
+    ParticipantSignal,
+    Quantifier,
     Rule,
     RuleFile,
     Temporal,
     Var,
 )
 
-__all__ = ["RuleSet", "typecheck", "overflow_diagnostics", "BUILTIN_ARITY", "map_vars", "MAX_INTERVAL_SAMPLES", "MAX_INTERVAL_SECONDS"]
+__all__ = ["RuleSet", "typecheck", "overflow_diagnostics", "BUILTIN_ARITY", "DOMAINS", "map_vars",
+           "MAX_INTERVAL_SAMPLES", "MAX_INTERVAL_SECONDS"]
 
 MAX_INTERVAL_SAMPLES = 10_000_000
 """Longest finite interval bound [samples of dt] (STL220): beyond it no trace is that long,
@@ -53,6 +56,11 @@ MAX_INTERVAL_SECONDS = 1e6
 BUILTIN_ARITY: Mapping[str, int] = MappingProxyType({"collision_free": 1})
 """Number of arguments of each built-in world predicate: ``collision_free(d)``, d [m] (what it
 means at each level: docs/architecture.md, "The rule language")."""
+
+
+DOMAINS: tuple[str, ...] = ("vehicles",)
+"""What a quantifier ranges over: ``vehicles``, every other participant of the scenario present
+(within sensing range) at the sample (docs/architecture.md, "The rule language")."""
 
 
 def map_vars(node: Node, fn: Callable[[Var], Node]) -> Node:
@@ -168,13 +176,30 @@ def _walk_ctx(node: Node, formula_pos: bool = True) -> Iterable[tuple[Node, bool
 
 
 def _is_prefix(n: Node) -> bool:
-    return isinstance(n, (Not, Temporal))
+    return isinstance(n, (Not, Temporal, Quantifier))
+
+
+def _operand(n: Node) -> Node:
+    """The operand of a prefix operator (a quantifier's body)."""
+    return n.body if isinstance(n, Quantifier) else n.operand  # type: ignore[attr-defined]
+
+
+def _walk_scoped(node: Node) -> Iterable[tuple[Node, frozenset[str]]]:
+    """Every node with the participant variables bound by the quantifiers above it."""
+    stack: list[tuple[Node, frozenset[str]]] = [(node, frozenset())]
+    while stack:
+        n, scope = stack.pop()
+        yield n, scope
+        inner = scope | {n.var} if isinstance(n, Quantifier) else scope
+        stack.extend((c, inner) for c in n.children())
 
 
 class _Checker:
     def __init__(self, rf: RuleFile, dt: float | None, horizon: int | None,
-                 provided: frozenset[str] | None, builtins: frozenset[str]) -> None:
+                 provided: frozenset[str] | None, builtins: frozenset[str],
+                 participant_signals: frozenset[str] | None = None) -> None:
         self.rf, self.dt, self.horizon, self.provided, self.builtins = rf, dt, horizon, provided, builtins
+        self.participant_signals = participant_signals
         self.file = rf.path
         self.diags: list[Diagnostic] = []
         self.parens = rf.parenthesized
@@ -262,15 +287,16 @@ class _Checker:
         if not (_is_prefix(n) and self.bare(n)):
             return
         chain = [n]
-        while _is_prefix(chain[-1].operand) and self.bare(chain[-1].operand):  # type: ignore[union-attr]
-            chain.append(chain[-1].operand)  # type: ignore[union-attr]
+        while _is_prefix(_operand(chain[-1])) and self.bare(_operand(chain[-1])):
+            chain.append(_operand(chain[-1]))
         op = b.op if isinstance(b, BinTemporal) else {"implies": "->", "iff": "<->"}.get(b.op, b.op)
-        temporal = next((c for c in chain if isinstance(c, Temporal)), None)
+        temporal = next((c for c in chain if isinstance(c, (Temporal, Quantifier))), None)
         if temporal is not None:
+            word = f"{temporal.op} {temporal.var}:" if isinstance(temporal, Quantifier) else temporal.op
             self.diags.append(codes.STL304(
-                f"'{temporal.op}' followed by '{op}' without parentheses", _span(temporal, self.file),
-                hint=f"here it means ({temporal.op} ...) {op} ...; write the parentheses, "
-                     f"or {temporal.op} (... {op} ...) if the operator should cover both"))
+                f"'{word}' followed by '{op}' without parentheses", _span(temporal, self.file),
+                hint=f"here it means ({word} ...) {op} ...; write the parentheses, "
+                     f"or {word} (... {op} ...) if the operator should cover both"))
         elif b.op == "implies":
             self.diags.append(codes.STL302(
                 "'not' followed by '->' without parentheses", _span(chain[0], self.file),
@@ -284,10 +310,13 @@ def typecheck(
     horizon: int | None = None,
     provided_signals: frozenset[str] | None = None,
     builtins: frozenset[str] = frozenset({"collision_free"}),
+    participant_signals: frozenset[str] | None = None,
 ) -> tuple[RuleSet, list[Diagnostic]]:
     """Check ``rf``; ``dt`` [s] enables the multiple-of-dt check, ``horizon`` [steps] with ``dt``
-    the horizon check, ``provided_signals`` the check that the world provides every input."""
-    ck = _Checker(rf, dt, horizon, provided_signals, builtins)
+    the horizon check, ``provided_signals`` the check that the world provides every input,
+    ``participant_signals`` the check that it provides every participant signal read (``None``:
+    any name is accepted)."""
+    ck = _Checker(rf, dt, horizon, provided_signals, builtins, participant_signals)
     diags = ck.diags
     file = rf.path
     first: dict[str, Node] = {}
@@ -337,6 +366,7 @@ def typecheck(
         if not isinstance(prior, Declaration):
             first[r.name] = r
         _check_names(r, ck, inputs, consts, outputs, defined, rule_lines, used)
+        _check_quantifiers(r, ck, set(first) | set(rule_lines))
         for n in r.formula.walk():
             if isinstance(n, (Temporal, BinTemporal)):
                 if n.interval is not None:
@@ -410,8 +440,9 @@ def _check_names(r: Rule, ck: _Checker, inputs: list[str], consts: Mapping[str, 
                  outputs: list[str], defined: Mapping[str, float], rule_lines: Mapping[str, Rule],
                  used: set[str]) -> None:
     seen: set[tuple[str, int, int]] = set()
+    bound = {q.var for q in r.formula.walk() if isinstance(q, Quantifier)}
     for n, fpos in _walk_ctx(r.formula):
-        if not isinstance(n, Var):
+        if not isinstance(n, Var) or n.name in bound:  # participants: _check_quantifiers
             continue
         sp = _span(n, ck.file)
         key = (n.name, sp.line, sp.column)
@@ -458,8 +489,54 @@ def _check_divisor(n: Arith, values: Mapping[str, float], ck: _Checker) -> None:
                                      _span(n.right, ck.file), hint="divide by a non-zero constant or a signal"))
 
 
+def _check_quantifiers(r: Rule, ck: _Checker, names: set[str]) -> None:
+    """Quantifiers and what they bind: a known domain (STL224), no nesting (STL228), a variable
+    that shadows nothing (STL227) and is used (STL229) only through its signals (STL226), each a
+    signal the world provides (STL216)."""
+    known = ck.participant_signals
+    reported: set[int] = set()  # the arguments of a participant signal's call (STL225 says it)
+    for n, scope in _walk_scoped(r.formula):
+        if isinstance(n, Call) and known is not None and n.name in known:
+            reported.update(id(a) for a in n.args)
+        if isinstance(n, Quantifier):
+            vsp = n.var_span or _span(n, ck.file)
+            if n.domain not in DOMAINS:
+                near = ck.did_you_mean(n.domain, DOMAINS)
+                ck.diags.append(codes.STL224(f"unknown domain '{n.domain}'", _span(n, ck.file),
+                                             hint=(near + " " if near else "") + f"domains: {', '.join(DOMAINS)}"))
+            if scope:
+                ck.diags.append(codes.STL228(
+                    f"quantifier over '{n.var}' inside the quantifier over '{sorted(scope)[0]}'", _span(n, ck.file),
+                    hint="participant signals relate one participant to the ego; write the rule with one quantifier"))
+            if n.var in names or n.var in scope:
+                what = "an enclosing quantifier's variable" if n.var in scope else "a declared name or a rule"
+                ck.diags.append(codes.STL227(f"'{n.var}' is already {what}", vsp,
+                                             hint="give the participant its own name, e.g. 'o'"))
+            if not any(isinstance(m, ParticipantSignal) and m.var == n.var for m in n.body.walk()):
+                ck.diags.append(codes.STL229(
+                    f"the body reads no signal of '{n.var}'", vsp,
+                    hint=f"read its signals, e.g. d_lon({n.var}); as written the rule only asks whether any "
+                         "participant is present"))
+        elif isinstance(n, Var) and n.name in scope and id(n) not in reported:
+            ck.diags.append(codes.STL226(
+                f"participant '{n.name}' is not a number or a formula", _span(n, ck.file),
+                hint=f"read one of its signals, e.g. d_lon({n.name}) or v({n.name})"))
+        elif isinstance(n, ParticipantSignal) and known is not None and n.name not in known:
+            near = ck.did_you_mean(n.name, known)
+            ck.diags.append(codes.STL216(
+                f"the world provides no participant signal '{n.name}'", _span(n, ck.file),
+                hint=(near + " " if near else "") + f"participant signals: {', '.join(sorted(known))}"))
+
+
 def _check_call(n: Call, ck: _Checker) -> None:
     sp = _span(n, ck.file)
+    known = ck.participant_signals
+    if known is not None and n.name in known:
+        got = ", ".join(a.name if isinstance(a, Var) else "..." for a in n.args)
+        ck.diags.append(codes.STL225(
+            f"'{n.name}({got})' reads a participant's signal: it takes one participant bound by a quantifier",
+            sp, hint=f"forall o in vehicles: ... {n.name}(o) ..."))
+        return
     if n.name not in ck.builtins:
         near = ck.did_you_mean(n.name, ck.builtins)
         known = ", ".join(sorted(ck.builtins)) or "none"
@@ -475,6 +552,8 @@ def _check_call(n: Call, ck: _Checker) -> None:
 def _integral(n: Compare, types: Mapping[str, str]) -> bool:
     """True when both sides are integer-valued (int signals/constants and integral numbers)."""
     for m in n.walk():
+        if isinstance(m, ParticipantSignal):
+            return False
         if isinstance(m, Var) and types.get(m.name) != "int":
             return False
         if isinstance(m, Num) and m.value != int(m.value):

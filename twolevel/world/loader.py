@@ -804,15 +804,17 @@ def _lint_rules(rule_files: Iterable[RuleFile], spec: ScenarioFile) -> list[Diag
         from twolevel.stl.lint import check_file, load_ruleset  # lazy: heavy-free, owned by the STL package
     except ImportError:
         return out
-    from twolevel.world.provided import PROVIDED_SIGNALS
+    from twolevel.world.provided import PROVIDED_PARTICIPANT_SIGNALS, PROVIDED_SIGNALS
 
     for rf in files:
         shown = _display(Path(rf.path))
-        result = check_file(shown, dt=spec.controller.dt, horizon=spec.controller.H, provided_signals=PROVIDED_SIGNALS)
+        result = check_file(shown, dt=spec.controller.dt, horizon=spec.controller.H, provided_signals=PROVIDED_SIGNALS,
+                            participant_signals=PROVIDED_PARTICIPANT_SIGNALS)
         diags = list(result.diagnostics)
         if rf.constants and not any(d.is_error for d in diags):
             # bindings the file does not declare (reported by the rule loader)
-            _, bound = load_ruleset(shown, dict(rf.constants), dt=spec.controller.dt, provided_signals=PROVIDED_SIGNALS)
+            _, bound = load_ruleset(shown, dict(rf.constants), dt=spec.controller.dt, provided_signals=PROVIDED_SIGNALS,
+                                    participant_signals=PROVIDED_PARTICIPANT_SIGNALS)
             seen = {(d.code, d.span, d.message) for d in diags}
             for d in bound:
                 if (d.code, d.span, d.message) not in seen:

@@ -22,6 +22,40 @@ rss_gap       m      gap to the nearest vehicle ahead in the ego's lane within t
                      beyond RSS's safe distance behind it (+inf if none)
 ============  =====  ===============================================================
 
+**Participant signals** relate one other participant o to the ego; a rule reads them inside a
+quantifier (``forall o in vehicles: d_lon(o) > 0``). Both are projected on the ego's route: route
+position s and lateral offset e (+ left), heading θ relative to the route there, half-extents of
+the box along the route l = (L|cos θ| + W|sin θ|)/2 and across it h = (L|sin θ| + W|cos θ|)/2.
+The lanes are bands of the route lane's width w parallel to it (band j: |e − j·w| ≤ w/2); a body
+*occupies* the bands its lateral extent [e − h, e + h] overlaps. Computed in
+:mod:`twolevel.world.relations`.
+
+============  =====  ========  =====================================================================
+name          unit   absent    meaning
+============  =====  ========  =====================================================================
+v             m/s    0         o's speed along the route, v_o·cos θ_o
+a             m/s²   0         change of v(o) over the last sample / dt (0 where o was absent at the
+                               previous sample; 0 in constant-velocity predictions)
+d_lon         m      +inf      o's rear minus the ego's front along the route, (s_o − l_o) − (s + l):
+                               > 0 when o is in front of the ego (CommonRoad's in_front_of)
+d_lat         m      +inf      e_o − e: o's lateral offset from the ego, + left
+in_same_lane  m      −inf      > 0 when o and the ego occupy a common lane: the overlap of o's body with
+                               the ego's lanes or of the ego's with o's, the smaller; < 0: the gap
+cut_in        m      −inf      > 0 while o cuts into the ego's lane (CommonRoad's cut_in(o, ego)): the
+                               least of in_same_lane(o), how far o's body crosses a lane boundary,
+                               and how far it moves towards the ego's side in 1 s
+precedes      m      −inf      > 0 when o is the vehicle directly ahead in the ego's lane (CommonRoad's
+                               precedes): the least of in_same_lane(o), d_lon(o) and, for each other
+                               vehicle q in that lane ahead of the ego, how far q's front is behind
+                               o's rear
+============  =====  ========  =====================================================================
+
+A participant is *present* at a sample when it is active and within ``r_near`` of the ego; the
+signal ``present[ID]`` (:data:`twolevel.stl.analysis.PRESENT`) is then +inf, else −inf, and its
+other signals take the *absent* values above (so that a rule's body, read where o is absent,
+neither needs nor invents a value: o is far away, not in the lane, not cutting in). In a trace
+participant ID's signal NAME is the column ``NAME[ID]``.
+
 Timing convention (the one place it is stated): sample k of a trace is the state at time k·dt
 and the control applied from k·dt on (held until (k+1)·dt). The simulator's trace and history
 rows, the low level's predictions (sample k = u*_k, the last held) and the MPC's signals (now =
@@ -31,6 +65,10 @@ which is also the u_{-1} of the cost term ‖u_0 − u_{-1}‖²) all follow it.
 
 from __future__ import annotations
 
+import math
+from types import MappingProxyType
+from typing import Mapping
+
 SIGNALS: tuple[str, ...] = ("x", "y", "psi", "v", "a", "delta", "s", "e", "v_max", "d_stop", "light_red",
                             "d_light", "d_lead", "v_lead", "min_gap", "n_near", "rss_gap")
 """Every signal the world provides, in the order of the table above (the one list of their names:
@@ -39,4 +77,16 @@ the simulator's history and trace columns follow this order)."""
 PROVIDED_SIGNALS: frozenset[str] = frozenset(SIGNALS)
 """The same names as a set (what the type checker accepts as a rule's inputs)."""
 
-__all__ = ["SIGNALS", "PROVIDED_SIGNALS"]
+PARTICIPANT_SIGNALS: tuple[str, ...] = ("v", "a", "d_lon", "d_lat", "in_same_lane", "cut_in", "precedes")
+"""Every participant signal the world provides, in the order of the table above."""
+
+PROVIDED_PARTICIPANT_SIGNALS: frozenset[str] = frozenset(PARTICIPANT_SIGNALS)
+"""The same names as a set (what the type checker accepts as participant signals)."""
+
+PARTICIPANT_ABSENT: Mapping[str, float] = MappingProxyType({
+    "v": 0.0, "a": 0.0, "d_lon": math.inf, "d_lat": math.inf, "in_same_lane": -math.inf, "cut_in": -math.inf,
+    "precedes": -math.inf})
+"""Each participant signal's value where its participant is absent."""
+
+__all__ = ["SIGNALS", "PROVIDED_SIGNALS", "PARTICIPANT_SIGNALS", "PROVIDED_PARTICIPANT_SIGNALS",
+           "PARTICIPANT_ABSENT"]

@@ -314,12 +314,13 @@ def load_rulesets(world: World) -> tuple[list, list]:
     signals checked against what the world provides: ``(rule sets, diagnostics)``. The one
     place the controllers and the simulator load a world's rules from."""
     from twolevel.stl.lint import load_ruleset
-    from twolevel.world.provided import PROVIDED_SIGNALS
+    from twolevel.world.provided import PROVIDED_PARTICIPANT_SIGNALS, PROVIDED_SIGNALS
 
     diags: list = []
     sets: list = []
     for path, consts in world.rule_files:
-        rs, d = load_ruleset(path, dict(consts), dt=world.settings.dt, provided_signals=PROVIDED_SIGNALS)
+        rs, d = load_ruleset(path, dict(consts), dt=world.settings.dt, provided_signals=PROVIDED_SIGNALS,
+                             participant_signals=PROVIDED_PARTICIPANT_SIGNALS)
         diags += d
         if rs is not None:
             sets.append(rs)
