@@ -21,6 +21,15 @@ position bounds are its reachable boxes) and the parent counts of the tree
 ``iff``/``xor`` (robustness ∓|a − b|, RTAMT's) need the exact values of both sides: stage 1
 asks stage 2 for a variable ``z = robustness`` (:meth:`~twolevel.compiler.emitter.RowEmitter.value`).
 
+Quantifiers over participants are expanded first over the participants in range at solve
+time, those whose presence ``present[p]`` the signals hold
+(:func:`~twolevel.stl.analysis.expand_quantifiers`): ``forall`` becomes a conjunction of
+``present[p] -> body(p)``, ``exists`` a disjunction of ``present[p] and body(p)``, the body
+reading ``name[p]`` for ``name(o)``. A presence known at solve time folds away (an absent
+participant's conjunct vanishes before any binary is created); a participant signal affine in the
+decision variables (``d_lon``: its route position less the ego's) encodes as any affine signal,
+and a product of two decision-dependent terms is MIL501 as elsewhere.
+
 Semantics are those of the offline monitor (:mod:`twolevel.monitor.robustness`, RTAMT's
 discrete-time offline semantics); the tests hold the encoding to it.
 """
@@ -28,6 +37,7 @@ discrete-time offline semantics); the tests hold the encoding to it.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Iterable, Literal, Mapping
 
 import numpy as np
@@ -41,6 +51,7 @@ from twolevel.compiler.types import Builtin, Encoding, Requirement
 from twolevel.diagnostics import Diagnostic
 from twolevel.milp.builder import ModelBuilder
 from twolevel.stl import ast
+from twolevel.stl.analysis import expand_quantifiers, participants_in
 
 __all__ = ["encode"]
 
@@ -76,6 +87,9 @@ def encode(
     first step whose value the plan can still change); each such shift is listed in
     ``Encoding.recovered`` as (name, step, new step). ``recover_after`` {name: k}: search from step
     + k + 1 on (after a recovery that the solver found infeasible)."""
+    pids = participants_in(signals)
+    requirements = [replace(r, formula=expand_quantifiers(r.formula, pids)) for r in requirements]
+    rules = {k: expand_quantifiers(v, pids) for k, v in (rules or {}).items()}
     table = TraceSignals(signals, length, consts)
     bounds = IntervalBounds(builder)
     parents = Parents()
@@ -84,7 +98,6 @@ def encode(
                    stable=stable)
     out = Encoding(mode=mode)
     diagnostics: list[Diagnostic] = []
-    requirements = list(requirements)
     try:
         trees: list[tuple[str, int, Tree]] = []
         for req in requirements:
