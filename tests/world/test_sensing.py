@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from twolevel.world.loader import load_scenario
 from twolevel.world.provided import PROVIDED_SIGNALS, SIGNALS
 from twolevel.world.sensing import Memory, others_predicted, sense
-from twolevel.world.signals import TrafficLog, signals_along
+from twolevel.world.signals import TrafficLog, participant_signals_along, signals_along
 from twolevel.world.traffic import TrafficState
 from twolevel.world.world import build_world
 
@@ -92,3 +92,63 @@ def test_predicted_vehicles_project_as_the_whole_route_search(cars, ego_s) -> No
     near = np.abs(e) < 10.0  # points far off the road may have two nearest route points
     np.testing.assert_allclose(got.s.ravel()[near], s[near], atol=1e-6)
     np.testing.assert_allclose(got.e.ravel()[near], e[near], atol=1e-6)
+
+
+PARTICIPANT_RULES = """\
+input float v
+uses_all = forall o in vehicles: ((precedes(o) > 0 or cut_in(o) > 0) -> (d_lon(o) >= v - v(o) + a(o)
+           and abs(d_lat(o)) >= 0 and in_same_lane(o) <= 10));
+"""
+
+
+@functools.lru_cache(maxsize=1)
+def _highway_world():
+    tmp = Path(tempfile.mkdtemp())
+    (tmp / "rules.stl").write_text(PARTICIPANT_RULES)
+    parts = ", ".join(f"{{id: car{i}, behaviour: constant_velocity, start: {{lane: middle, s: {100 + 10 * i}}}}}"
+                      for i in range(6))
+    (tmp / "s.yaml").write_text(f"kind: scenario\nname: hw\nmap: {ROOT / 'maps' / 'highway.yaml'}\n"
+                                "ego: {start: {lane: middle, s: 20}, speed: 10}\n"
+                                "route: {start: {lane: middle, s: 20}, goal: {lane: middle, s: 600}}\n"
+                                f"participants: [{parts}]\nrules: [rules.stl]\ncontroller: {{r_near: 40}}\n"
+                                "run: {duration: 10, seed: 0}\n")
+    scn, diags = load_scenario(str(tmp / "s.yaml"))
+    assert scn is not None, [d.message for d in diags]
+    return build_world(scn)
+
+
+def test_batched_participant_signals_equal_the_reference() -> None:
+    """Participant signals over K candidates (sense) equal participant_signals_along row by row:
+    a car ahead in the lane, one cutting in from the left, one behind, one ahead on the right
+    lane, one beyond r_near and one braking; the candidates drift across the lane boundary."""
+    w = _highway_world()
+    assert w.participant_signals == ("present", "v", "a", "d_lon", "d_lat", "in_same_lane", "cut_in", "precedes")
+    rng = np.random.default_rng(1)
+    K, T, dt, s0 = 5, 30, w.settings.dt, 100.0
+    v = np.full((K, T), 12.0)
+    s = s0 + 12.0 * dt * np.arange(T)[None] * np.ones((K, 1))
+    lat = rng.uniform(-0.2, 0.2, (K, 1)) + np.linspace(0, 1, T)[None] * rng.uniform(0, 2.5, (K, 1))
+    pts = w.route.position(s, lat)
+    psi = w.route.heading_at(s) + 0.05
+    lane = np.array([1, 2, 1, 0, 1, 1])  # right 0, middle 1, left 2
+    s_o = np.array([s0 + 25, s0 + 12, s0 - 15, s0 + 8, s0 + 90, s0 + 40])
+    p0, h0 = w.lanes.pose(lane, s_o, np.array([0, -1.0, 0, 0, 0, 0]))
+    h0 = h0 + np.array([0, -0.15, 0, 0, 0, 0])
+    traffic = TrafficState(0.0, p0[:, 0], p0[:, 1], h0, np.array([8.0, 13.0, 12.0, 14.0, 10.0, 6.0]), lane, s_o,
+                           np.zeros(6), np.ones(6, bool), np.zeros(6), np.full(6, -1))
+    others = others_predicted(w, traffic, float(pts[0, 0, 0]), float(pts[0, 0, 1]), s0, T - 1, dt)
+    got = sense(w, 0.0, dt, Memory.fresh(w), others, pts[..., 0], pts[..., 1], psi, v, np.zeros((K, T)),
+                np.zeros((K, T)))
+    ids = [w.parts.ids[i] for i in others.index]
+    assert "car4" not in ids and len(ids) == 5  # beyond r_near = 40 m
+    for k in range(K):
+        log = TrafficLog(others.x.T, others.y.T, others.psi.T, others.v.T, np.ones((T, others.n), bool),
+                         w.parts.length[others.index], w.parts.width[others.index])
+        ref = participant_signals_along(w, log, {"x": pts[k, :, 0], "y": pts[k, :, 1], "psi": psi[k]}, ids=ids)
+        for key, want in ref.items():
+            np.testing.assert_allclose(got[key][k], want, rtol=0, atol=1e-6, err_msg=f"{key} row {k}")
+    assert set(got) - PROVIDED_SIGNALS == set(ref)
+    # the cases are there: a car cuts in, one precedes, one is in the same lane, one is behind
+    assert (got["cut_in[car1]"] > 0).any() and (got["precedes[car0]"] > 0).any()
+    assert (got["in_same_lane[car3]"] < 0).all() and (got["in_same_lane[car1]"] > 0).any()
+    assert (got["d_lon[car2]"] < 0).all() and (got["present[car2]"] == np.inf).any()

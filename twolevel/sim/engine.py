@@ -44,8 +44,10 @@ the rules read (a, s, e, d_stop, light_red, d_light, d_lead, v_lead; v, v_max, m
 n_near are base columns), a few controller columns (``candidates``; ``ll_violated``: the rules u*
 broke on the detailed prediction, i.e. why the low level intervened; ``hl_status``, ``hl_qps``,
 ``t_plant_ms``; the safety layer's ``verification``, ``failsafe``, ``refuted``, ``ttr_s``,
-``t_verify_ms``; ``t_step_cpu_ms``: the control step's CPU time), then ``rob_<rule>`` per rule:
-the robustness at that step on the *executed* trajectory, by the online monitor — exactly what ``twolevel monitor rules.stl trace.csv``
+``t_verify_ms``; ``t_step_cpu_ms``: the control step's CPU time), the criticality columns and,
+when the rules quantify over participants, every participant's signals
+(:mod:`twolevel.sim.extra_columns`), then ``rob_<rule>`` per rule: the robustness at that step on
+the *executed* trajectory, by the online monitor — exactly what ``twolevel monitor rules.stl trace.csv``
 computes from the same file. A rule whose window looks ahead L steps is final L steps later, so
 rows are written with that delay; when the run ends, is interrupted (Ctrl-C) or crashes, the
 remaining rows are completed with the windows truncated at the end (RTAMT's semantics) and
@@ -103,6 +105,7 @@ from twolevel.models.rollout import rollout
 from twolevel.safety.verify import Verdict, context, time_to_react
 from twolevel.sim.codes import SIM610, SIM611, SIM612, SIM613, SIM614, SIM615, SIM616, SIM617, SIM618
 from twolevel.sim.collisions import CollisionLog
+from twolevel.sim.extra_columns import ExtraColumns
 from twolevel.sim.frames import FrameWriter
 from twolevel.sim.history import History
 from twolevel.sim.provenance import run_metadata
@@ -346,7 +349,9 @@ class ClosedLoop:
         self.initial: Verdict | None = None
         self.stats = LoopStats()
         self.collisions = CollisionLog(self.ctx)
-        self.columns = RuleColumns(self.rules, self.consts, world.settings.dt, SIGNALS)
+        self.extra = ExtraColumns(world)
+        self.columns = RuleColumns(self.rules, self.consts, world.settings.dt, SIGNALS + self.extra.signals,
+                                   participants=self.extra.ids)
         self.goal_reached_t: float | None = None
         self.t_wall0 = time.perf_counter()
         self.unsatisfiable = UnsatisfiableLog()
@@ -391,7 +396,8 @@ class ClosedLoop:
                 diags: list[Diagnostic], where: Span) -> tuple[RunSummary, list[Diagnostic]]:
         out_dir = str(directory.path)
         rule_names = [r.name for r in self.rules]
-        columns = list(BASE_COLUMNS) + list(SIGNAL_COLUMNS) + list(EXTRA_COLUMNS) + [f"rob_{n}" for n in rule_names]
+        columns = (list(BASE_COLUMNS) + list(SIGNAL_COLUMNS) + list(EXTRA_COLUMNS) + list(self.extra.columns)
+                   + [f"rob_{n}" for n in rule_names])
         status, error, unwritable = RunStatus.COMPLETE, "", False
         self.t_wall0 = time.perf_counter()
         writer: TraceWriter | None = None
@@ -497,7 +503,7 @@ class ClosedLoop:
         x = fw.initial_state(w.ego.x, w.ego.y, w.ego.psi, w.ego.v, p)
         state = LoopState(x, w.traffic0, Memory.fresh(w), float(w.route.local_coordinates(x[None, :2])[0][0]))
         keep = max([r.past for r in self.rules] + [self.planner.history_depth])
-        out = Recorders(writer, frames, History(SIGNALS, keep))
+        out = Recorders(writer, frames, History(SIGNALS + self.extra.signals, keep))
         self.low.warm_up(x)
         interruption.checkpoint()
         rollout(x, np.zeros((1, 1, 2)), dt, p)  # compile the plant step before timing anything
@@ -655,8 +661,9 @@ class ClosedLoop:
         time to react [s], NaN when not computed this step)."""
         now = dict(sensed.now)
         now["a"], now["delta"] = applied.accel, float(applied.control[0])
-        out.history.append(now)
         X, Y, psi, v = (float(c) for c in sensed.ego.pose)
+        extra = self.extra.record(now, (X, Y, psi, v), sensed.others)
+        out.history.append(now)
         t = sensed.t
         min_dist = self.collisions.observe(t, X, Y, psi, v, sensed.traffic)
         row = {"t": round(t, 9), "x": X, "y": Y, "psi": psi, "v": v, "delta": float(applied.control[0]),
@@ -669,6 +676,7 @@ class ClosedLoop:
                "refuted": applied.safety.refuted, "ttr_s": ttr, "t_verify_ms": applied.verify_ms,
                "t_step_cpu_ms": times.cpu}
         row.update({c: now[c] for c in SIGNAL_COLUMNS})
+        row.update(extra)
         self.stats.add(times, abs(now["e"]), v - now["v_max"], min_dist, now["min_gap"], applied.decision, v,
                        applied.safety.outcome.value, ttr)
         if out.frames is not None:

@@ -31,15 +31,16 @@ class _RowSink(Protocol):
 class RuleColumns:
     """Fills the ``rob_<rule>`` columns of every row and writes the rows to a sink (a
     :class:`~twolevel.sim.trace.TraceWriter`) in order (see the module docstring); ``signals``:
-    the names of every signal a sample carries."""
+    the names of every signal a sample carries; ``participants``: the ids the rules' quantifiers
+    range over (each sample carries their ``present[ID]`` and signals)."""
 
     def __init__(self, rules: Sequence[RuleCheck], consts: Mapping[str, float], dt: float,
-                 signals: Sequence[str]) -> None:
+                 signals: Sequence[str], participants: Sequence[str] = ()) -> None:
         self.rules, self.consts, self.dt, self.signals = rules, consts, dt, signals
         self.names = [f"rob_{r.name}" for r in rules]
         try:
             self.online: OnlineMonitor | None = OnlineMonitor([ast.Rule(r.name, r.formula) for r in rules], dt,
-                                                              consts=consts)
+                                                              consts=consts, participants=participants)
         except MonitorError:
             self.online = None  # unbounded future: robustness filled at the end from the offline monitor
         self.robustness: dict[str, list[float]] = {r.name: [] for r in rules}

@@ -183,7 +183,9 @@ class TraceWriter:
         self._flush_every = max(1, flush_every)
         try:
             self._fh = io.open(create_output(self.run_dir / TRACE_FILE), "w", encoding="utf-8", newline="")
-            self._fh.write(",".join(self.columns) + "\n")
+            header = io.StringIO()  # quoted where a name needs it (a participant id with a comma)
+            csv.writer(header, lineterminator="\n").writerow(self.columns)
+            self._fh.write(header.getvalue())
             self._fh.flush()
             self.directory.record(RunStatus.RUNNING)
         except BaseException:

@@ -24,6 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from twolevel.models.obb import pose_separation
+from twolevel.stl.analysis import PRESENT, participant_key
+from twolevel.world.relations import acceleration, relations
 from twolevel.world.signals import (PASS_MARGIN, STOP_ZONE, StopMemory, ahead_in_lane, rss_gap, sensing_window,
                                     update_stop_memory)
 from twolevel.world.traffic import RED, YELLOW, TrafficState
@@ -174,7 +176,9 @@ def sense(world: World, t0: float, dt: float, memory: Memory, others: Others, x:
           psi: np.ndarray, v: np.ndarray, a: np.ndarray, delta: np.ndarray, *, s_center: np.ndarray | None = None,
           half_window: float = 10.0) -> dict[str, np.ndarray]:
     """Every provided signal (K, T) along K ego trajectories sampled every ``dt`` [s] from ``t0``
-    [s]: poses x, y [m], psi [rad], speed v [m/s] and inputs a [m/s²], delta [rad], each (K, T).
+    [s]: poses x, y [m], psi [rad], speed v [m/s] and inputs a [m/s²], delta [rad], each (K, T);
+    and, when the scenario's rules quantify over participants, the participant signals they read
+    of each of ``others`` (``name[ID]``, :func:`twolevel.world.signals.participant_signals_along`).
     ``memory`` is the state of the past *before* sample 0; ``others`` the other vehicles at the
     same T samples. Route projections search ``s_center`` (T,) ± ``half_window`` [m]
     (default: the whole route)."""
@@ -191,7 +195,25 @@ def sense(world: World, t0: float, dt: float, memory: Memory, others: Others, x:
     out["d_stop"] = _stop_distance(world, memory.stops, s, v, dt)
     out["light_red"], out["d_light"] = _light(world, memory, t0 + dt * np.arange(T), s, v)
     out.update(_lead_and_gap(world, others, x, y, psi, s, e, v))
+    if world.participant_signals and others.n:
+        out.update(_participants(world, others, x, y, psi, s, e, dt))
     return out
+
+
+def _participants(world: World, others: Others, x: np.ndarray, y: np.ndarray, psi: np.ndarray, s: np.ndarray,
+                  e: np.ndarray, dt: float) -> dict[str, np.ndarray]:
+    """The participant signals the scenario's rules read (``world.participant_signals``), (K, T)
+    per participant among ``others``: present where it is within r_near."""
+    near = np.hypot(others.x.T[None] - x[..., None], others.y.T[None] - y[..., None]) <= world.settings.r_near
+    other = {"s": others.s.T[None], "e": others.e.T[None], "psi": others.psi.T[None], "v": others.v.T[None]}
+    rel = relations(world.route, {"s": s[..., None], "e": e[..., None], "psi": psi[..., None]},
+                    (world.ego.length, world.ego.width), other, others.length, others.width, near)
+    names = world.participant_signals
+    if "a" in names:
+        rel["a"] = acceleration(rel["v"], near, dt)
+    rel[PRESENT] = np.where(near, np.inf, -np.inf)
+    ids = world.parts.ids
+    return {participant_key(n, ids[j]): rel[n][..., i] for n in names for i, j in enumerate(others.index)}
 
 
 def _stop_distance(world: World, mem: StopMemory, s: np.ndarray, v: np.ndarray, dt: float) -> np.ndarray:

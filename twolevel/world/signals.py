@@ -35,6 +35,8 @@ Definitions (sensing is limited to ``r_near``):
   (:func:`twolevel.world.assumptions.safe_distance` with ``settings.response``:
   :class:`~twolevel.world.loader.Sensing`) — ≥ 0 when the ego can stop behind it whatever it does
   within the assumptions. +inf if none.
+* Participant signals (``d_lon[ID]``, ``present[ID]``, …; :mod:`twolevel.world.provided`):
+  :func:`participant_signals_along`, with each participant projected as for ``d_lead``.
 """
 
 from __future__ import annotations
@@ -45,14 +47,17 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from twolevel.models.obb import box_corners, box_separation
+from twolevel.stl.analysis import PRESENT, participant_key
 from twolevel.world.assumptions import ResponseBounds, safe_distance
 from twolevel.world.geometry import Route
-from twolevel.world.provided import PROVIDED_SIGNALS
+from twolevel.world.provided import PARTICIPANT_SIGNALS, PROVIDED_SIGNALS
+from twolevel.world.relations import acceleration, relations
 from twolevel.world.traffic import RED, YELLOW, TrafficState
 from twolevel.world.world import World
 
 __all__ = ["PASS_MARGIN", "STOP_ZONE", "TrafficLog", "StopMemory", "HorizonConstants", "signals_along",
-           "horizon_constants", "update_stop_memory", "ahead_in_lane", "rss_gap", "sensing_window"]
+           "participant_signals_along", "horizon_constants", "update_stop_memory", "ahead_in_lane", "rss_gap",
+           "sensing_window"]
 
 PASS_MARGIN = 5.0  # [m] how far past a stop line it still counts (so running it is visible)
 STOP_ZONE = 3.0  # [m] a stop counts for a stop sign when made at most this far before its line
@@ -236,6 +241,35 @@ def signals_along(
     out.update(_others(world, traffic, x, y, psi, s, e, v))
     assert set(out) == PROVIDED_SIGNALS
     return out
+
+
+def participant_signals_along(
+    world: World, traffic: TrafficLog, ego: Mapping[str, np.ndarray], *, dt: float | None = None,
+    names: Sequence[str] = (PRESENT,) + PARTICIPANT_SIGNALS, ids: Sequence[str] | None = None,
+) -> dict[str, np.ndarray]:
+    """Participant signals along an ego trajectory: for every participant of ``traffic`` (N of
+    them, named ``ids``, default the world's participants) and each of ``names``, the (T,) array
+    ``name[ID]`` (:func:`~twolevel.stl.analysis.participant_key`). ``ego`` as for
+    :func:`signals_along` (x, y [m], psi [rad], sampled every ``dt`` [s]); a participant is
+    present where it is active and within r_near."""
+    dt = world.settings.dt if dt is None else dt
+    ids = world.parts.ids if ids is None else ids
+    x, y, psi = (np.asarray(ego[k], dtype=float) for k in ("x", "y", "psi"))
+    T, N = traffic.x.shape
+    route = world.route
+    s, e = route.local_coordinates(np.stack([x, y], axis=1))
+    r_near = world.settings.r_near
+    near = traffic.active & (np.hypot(traffic.x - x[:, None], traffic.y - y[:, None]) <= r_near)
+    so, eo = np.full((T, N), np.nan), np.full((T, N), np.nan)
+    k, i = np.nonzero(near)
+    if len(k):
+        so[k, i], eo[k, i] = route.project_near(np.stack([traffic.x[k, i], traffic.y[k, i]], axis=1), s[k],
+                                                r_near + 5.0)
+    rel = relations(route, {"s": s[:, None], "e": e[:, None], "psi": psi[:, None]}, (world.ego.length, world.ego.width),
+                    {"s": so, "e": eo, "psi": traffic.psi, "v": traffic.v}, traffic.length, traffic.width, near)
+    rel["a"] = acceleration(rel["v"], near, dt)
+    rel[PRESENT] = np.where(near, np.inf, -np.inf)
+    return {participant_key(n, pid): rel[n][:, j] for n in names for j, pid in enumerate(ids)}
 
 
 @dataclass(frozen=True, eq=False)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 from types import MappingProxyType
 from typing import Mapping
 
@@ -108,6 +109,15 @@ class World:
     route_light_index: np.ndarray  # (Q,) index into ``lights``
     assumptions: Assumptions = field(default_factory=Assumptions)  # about other road users (safety layer)
     junctions: Junctions = field(default_factory=Junctions.empty)  # arms, connecting lanes, stop lines, conflicts
+
+    @cached_property
+    def participant_signals(self) -> tuple[str, ...]:
+        """The participant signals the scenario's rules read, ``present`` first; empty when no
+        rule quantifies over participants. Sensing computes these for each participant in range,
+        and a run records them (:mod:`twolevel.world.relations`)."""
+        from twolevel.world.relations import signals_read_by
+
+        return signals_read_by(load_rulesets(self)[0])
 
 
 def _limits(spec: MapFile, lanes: LaneSet, index: dict[str, int], plans: list[Plan]) -> SpeedLimits:
