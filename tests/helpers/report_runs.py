@@ -25,8 +25,13 @@ def write_run(
     summary: Mapping[str, Any] | None = None,
     frames: Sequence[Mapping[str, Any]] | None = None,
     status: str = "complete",
+    extra_columns: Sequence[str] | None = None,
 ) -> Path:
-    """Write ``rows`` with the real TraceWriter, then close with ``status``."""
+    """Write ``rows`` with the real TraceWriter (the base columns, ``extra_columns`` — by default
+    the other keys of the first row but the ``rob_`` ones —, a ``rob_`` column per rule), then
+    close with ``status``."""
+    if extra_columns is None:
+        extra_columns = [k for k in (rows[0] if rows else {}) if k not in BASE_COLUMNS and not k.startswith("rob_")]
     base = {
         "scenario": {"name": "traffic_rules", "file": "scenarios/traffic_rules.yaml", "hash": "sha256:abc123"},
         "rules": [{"name": r, "file": "rules/urban.stl", "hash": f"sha256:{i:06d}"} for i, r in enumerate(rules)],
@@ -36,8 +41,7 @@ def write_run(
         "map_lines": [[[-20.0, -1.75], [400.0, -1.75]], [[-20.0, 1.75], [400.0, 1.75]], [[-20.0, 5.25], [400.0, 5.25]]],
     }
     base.update(meta or {})
-    extra = tuple(k for k in ("verification", "ttr_s") if rows and k in rows[0])
-    w = TraceWriter(run_dir, BASE_COLUMNS + tuple(f"rob_{r}" for r in rules) + extra, base)
+    w = TraceWriter(run_dir, BASE_COLUMNS + tuple(extra_columns) + tuple(f"rob_{r}" for r in rules), base)
     for row in rows:
         w.write(row)
     w.close(status, summary if summary is not None else {"collisions": []})
@@ -82,6 +86,9 @@ def traffic_rows(n: int = 300, *, dt: float = 0.1, seed: int = 0, slow: float = 
             "rob_red_light": 2.0, "rob_collision": gap - 1.0,
             "verification": "verified" if decision != "brake" else "failsafe",
             "ttr_s": (3.0 if decision == "mpc" else 0.0) if k % 5 == 0 else float("nan"),
+            # criticality: only the car closing in (collide) is ahead in the lane, standing
+            "dhw_m": gap if lat == 0.0 else math.inf, "thw_s": gap / v[k] if lat == 0.0 and v[k] > 0 else math.inf,
+            "ttc_s": gap / v[k] if lat == 0.0 and v[k] > 0 else math.inf, "ttc_any_s": math.inf,
         })
         frames.append({
             "t": t[k], "ego": [x[k], 0.0, 0.0, 4.22, 1.8],

@@ -223,3 +223,33 @@ def test_the_safety_layer_and_braking(hand) -> None:
     assert sf.ttr_min_s == 0.5
     # v drops 10 → 8 m/s in one step (20 m/s²) and comes back: one step of nine brakes harder than 4 m/s²
     assert sf.decel_peak_mps2 == pytest.approx(20.0) and sf.hard_braking_share == pytest.approx(1 / 9)
+
+
+def test_criticality_minima_figure_and_headline(tmp_path) -> None:
+    """The criticality columns' minima (inf-only columns stay inf), the figure (with the safety
+    layer's time to react where the trace has it) and the summary rows."""
+    from twolevel.report.figures import Series, render_figures
+    from twolevel.report.summary import headline
+
+    inf = math.inf
+    ttc = [inf, 8.0, 4.0, 2.5, 3.0, inf, inf, inf, inf, inf]
+    thw = [3.0, 2.0, 1.2, 0.9, 1.1, 1.5, 2.0, inf, inf, inf]
+    rows = _hand_rows()
+    for k, row in enumerate(rows):
+        row.update({"ttc_s": ttc[k], "thw_s": thw[k], "dhw_m": 10.0 * thw[k], "ttc_any_s": inf,
+                    "ttr_s": 1.5 if k % 5 == 0 else NAN})
+    run_dir = write_run(tmp_path / "crit", rows, rules=("speed",))
+    m = compute_metrics(read_run(run_dir))
+    c = m.criticality
+    assert (c.min_ttc_s, c.t_min_ttc_s) == (2.5, pytest.approx(0.3))
+    assert (c.min_thw_s, c.min_dhw_m, c.t_min_dhw_s) == (0.9, 9.0, pytest.approx(0.3))
+    assert c.min_ttc_any_s == inf and math.isnan(c.t_min_ttc_any_s)
+    assert m.to_dict()["criticality"]["min_ttc_any_s"] == "inf"
+    rows_shown = dict(headline(m))
+    assert rows_shown["min. time headway"] == "0.90 s at 0.3 s"
+    figs, skipped = render_figures([Series("crit", read_run(run_dir), m)], None, formats=("png",))
+    assert "criticality" in [f.name for f in figs]
+    old = compute_metrics(read_run(write_run(tmp_path / "old", _hand_rows(), rules=("speed",))))
+    assert old.criticality is None
+    assert any("criticality" in s for s in render_figures([Series("old", read_run(tmp_path / "old"), old)], None,
+                                                          formats=("png",))[1])

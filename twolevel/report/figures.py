@@ -314,15 +314,52 @@ def _distance(fig: Any, series: Sequence[Series]) -> bool:
     return True
 
 
-def _clip_top(ax: Any, cols: Sequence[np.ndarray | None], top: float, bottom: float | None = None) -> None:
-    """Keep the interesting range in view: the axis stops at ``top`` [m] and says so."""
+def _clip_top(ax: Any, cols: Sequence[np.ndarray | None], top: float, bottom: float | None = None,
+              unit: str = "m") -> None:
+    """Keep the interesting range in view: the axis stops at ``top`` (in ``unit``) and says so."""
     vals = np.concatenate([c[np.isfinite(c)] for c in cols if c is not None] or [np.array([])])
     if vals.size and vals.max() > top:
         low = bottom if bottom is not None else min(float(vals.min()), 0.0)
         ax.set_ylim(low - (0.0 if bottom is not None else 0.04 * (top - low)), top)
-        ax.text(0.995, 0.97, f"axis clipped at {top:g} m", transform=ax.transAxes, ha="right", va="top", fontsize=7, color="0.4")
+        ax.text(0.995, 0.97, f"axis clipped at {top:g} {unit}", transform=ax.transAxes, ha="right", va="top", fontsize=7, color="0.4")
     elif bottom is not None:
         ax.set_ylim(bottom=bottom)
+
+
+CRITICAL_VIEW_S = 10.0  # time measures are shown up to 10 s (the interesting range)
+
+
+def _criticality(fig: Any, series: Sequence[Series]) -> bool:
+    """Time to collision (the vehicle ahead; anyone, dotted; the safety layer's time to react,
+    dots, where the trace has it), time headway and distance headway over time."""
+    have = [(i, s) for i, s in enumerate(series) if s.col("ttc_s") is not None or s.col("thw_s") is not None]
+    if not have:
+        return False
+    fig.set_figheight(6.6)
+    ax_t, ax_h, ax_d = fig.subplots(3, 1, sharex=True)
+    for i, s in have:
+        name = s.label if len(series) > 1 else None
+        ttc, ttc_any, ttr = s.col("ttc_s"), s.col("ttc_any_s"), s.col("ttr_s")
+        if ttc is not None:
+            ax_t.plot(s.t, _finite(ttc), color=_colour(i), linewidth=1.2, label=name or "TTC, vehicle ahead")
+        if ttc_any is not None:
+            ax_t.plot(s.t, _finite(ttc_any), color=_colour(i), linewidth=1.0, linestyle=":",
+                      label=_run_suffix(series, s, "TTC, anyone"))
+        if ttr is not None:
+            ax_t.plot(s.t, _finite(ttr), color=_colour(i), marker=".", linestyle="none", markersize=3,
+                      label=_run_suffix(series, s, "time to react (safety layer)"))
+        for ax, col, what in ((ax_h, "thw_s", "time headway"), (ax_d, "dhw_m", "distance headway")):
+            c = s.col(col)
+            if c is not None:
+                ax.plot(s.t, _finite(c), color=_colour(i), linewidth=1.2, label=name or what)
+    ax_t.set(ylabel="time [s]", title="Criticality: to the vehicle ahead (and anyone)")
+    ax_h.set(ylabel="time headway [s]")
+    ax_d.set(xlabel="time [s]", ylabel="distance headway [m]")
+    for ax, col, top, unit in ((ax_t, "ttc_s", CRITICAL_VIEW_S, "s"), (ax_h, "thw_s", CRITICAL_VIEW_S, "s"),
+                               (ax_d, "dhw_m", VIEW_M, "m")):
+        _clip_top(ax, [s.col(col) for _, s in have], top, bottom=0.0, unit=unit)
+        _legend(ax)
+    return True
 
 
 def _nearby(fig: Any, series: Sequence[Series]) -> bool:
@@ -403,6 +440,7 @@ FIGURES: dict[str, tuple[str, Callable[[Any, Sequence[Series]], bool], float]] =
     "speed": ("Speed and speed limit", _speed, 3.4),
     "light_state": ("Traffic-light state", _lights, 1.9),
     "distance": ("Distance to other vehicles", _distance, 5.4),
+    "criticality": ("Criticality: time to collision, time and distance headway", _criticality, 6.6),
     "nearby": ("Nearby vehicles", _nearby, 3.0),
     "robustness": ("Rule robustness", _robustness, 3.0),
     "decisions": ("Decisions by level", _decisions, 3.0),

@@ -27,6 +27,7 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from twolevel.control.low_level.guard import Outcome
+from twolevel.sim.extra_columns import CRITICALITY_COLUMNS
 from twolevel.sim.summary import HARD_BRAKING
 from twolevel.sim.summary import LEVEL as _LEVEL
 from twolevel.sim.summary import LEVELS as _LEVELS
@@ -137,6 +138,23 @@ class DistanceMetrics(_Serialisable):
     collision_line_m: float
     time_below_line_s: float
     below_line: bool
+
+
+@dataclass(frozen=True)
+class CriticalityMetrics(_Serialisable):
+    """The smallest criticality measures of the run and when (the trace's ``ttc_s``, ``thw_s``,
+    ``dhw_m``, ``ttc_any_s``: :mod:`twolevel.world.criticality`); ``inf`` when the measure never
+    applied (no vehicle ahead, no collision course)."""
+
+    min_ttc_s: float
+    t_min_ttc_s: float
+    min_thw_s: float
+    t_min_thw_s: float
+    min_dhw_m: float
+    t_min_dhw_s: float
+    min_ttc_any_s: float
+    t_min_ttc_any_s: float
+
 
 
 @dataclass(frozen=True)
@@ -280,6 +298,7 @@ class Metrics(_Serialisable):
     collisions: CollisionMetrics
     safety: SafetyMetrics | None = None
     problems: tuple[str, ...] = field(default=())
+    criticality: CriticalityMetrics | None = None
 
     def to_dict(self) -> dict[str, Any]:
         d = _jsonable(self)
@@ -408,6 +427,20 @@ def _distance(dist: np.ndarray | None, gap: np.ndarray | None, t: np.ndarray, du
         min_dist_m=md, t_min_dist_s=tmd, min_gap_m=mg, t_min_gap_s=tmg,
         collision_line_m=COLLISION_LINE_M, time_below_line_s=float(dur[below].sum()), below_line=bool(below.any()),
     )
+
+
+def _criticality(run: RunData, t: np.ndarray) -> CriticalityMetrics | None:
+    """The minima of the criticality columns the trace has (None without any: an older trace)."""
+    values: list[float] = []
+    for col in CRITICALITY_COLUMNS:
+        c = run.columns.get(col)
+        if not isinstance(c, np.ndarray) or c.size != t.size or not c.size:
+            values += [math.nan, math.nan]
+            continue
+        c = np.asarray(c, dtype=float)
+        m, tm = _argext(c, t, np.argmin)
+        values += [math.inf, math.nan] if math.isnan(m) else [m, tm]
+    return None if all(math.isnan(v) for v in values[::2]) else CriticalityMetrics(*values)
 
 
 def _lights(states: list[str], dur: np.ndarray) -> LightMetrics:
@@ -574,6 +607,7 @@ def compute_metrics(run: RunData, label: str | None = None) -> Metrics:
         collisions=collisions,
         safety=_safety(outcomes, ttr, v, t) if has else None,
         problems=tuple(problems + [p for p in cols.problems if p not in problems]),
+        criticality=_criticality(run, t) if has else None,
     )
 
 
@@ -585,6 +619,7 @@ def _default_label(run: RunData) -> str:
 
 __all__ = [
     "COLLISION_LINE_M", "STEP_BUDGET_MS", "Distribution", "Metrics", "Violation", "RuleMetrics", "SafetyMetrics",
+    "CriticalityMetrics",
     "compute_metrics", "find_violations",
     "distribution", "intervals", "sample_durations", "rule_names",
 ]

@@ -74,6 +74,14 @@ def headline(m: Metrics) -> list[tuple[str, str]]:
         ]
     if m.nearby is not None:
         rows += [("nearby vehicles, max / mean", f"{m.nearby.max} / {fmt(m.nearby.mean, 2)}")]
+    if m.criticality is not None:
+        c = m.criticality
+        rows += [
+            ("min. time to collision, vehicle ahead / anyone",
+             f"{fmt(c.min_ttc_s, 2, 's')} at {fmt(c.t_min_ttc_s, 1, 's')} / {fmt(c.min_ttc_any_s, 2, 's')}"),
+            ("min. time headway", f"{fmt(c.min_thw_s, 2, 's')} at {fmt(c.t_min_thw_s, 1, 's')}"),
+            ("min. distance headway", f"{fmt(c.min_dhw_m, 2, 'm')} at {fmt(c.t_min_dhw_s, 1, 's')}"),
+        ]
     rows += [
         ("rule violations", f"{len(m.violations)} in {sum(1 for r in m.rules if not r.satisfied)} of {len(m.rules)} rule(s)"),
         ("collisions", fmt(m.collisions.count) + (" — COLLIDED" if m.collisions.collided else "")
