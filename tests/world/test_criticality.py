@@ -1,6 +1,6 @@
-"""Criticality measures on hand-computed cases (commonroad-crime forces commonroad-io 2024.3 and
-~400 MB of its own stack, so it is not installed beside twolevel; these cases are worked out by
-hand instead, with CriMe's definitions of HW and THW and the constant-velocity TTC)."""
+"""Criticality measures on hand-computed cases, with CriMe's definitions of HW and THW and the
+constant-velocity TTC (test_criticality_crime.py compares them with CommonRoad-CriMe itself when
+the optional extra crime is installed)."""
 
 from __future__ import annotations
 
