@@ -11,7 +11,7 @@ STAMP  := $(VENV)/.installed-$(EXTRAS)
 COMPILE = $(BIN)/uv pip compile --quiet --universal --python-version 3.11 --generate-hashes \
           pyproject.toml requirements/tools.in
 
-.PHONY: run test test-fast bench lock upgrade clean
+.PHONY: run test test-fast bench crosscheck lock upgrade clean
 
 define venv_from_lock
 	@$(PYTHON) -c 'import sys; sys.exit(sys.version_info < (3, 11))' || \
@@ -42,6 +42,15 @@ test-fast: $(STAMP)
 bench: $(STAMP)
 	for b in benchmarks/*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
 
+# twolevel's CommonRoad rule pack against CommonRoad's own monitor (crmonitor), which needs its
+# own environment (.crosscheck/venv from requirements/crosscheck.txt, Python 3.10 or 3.11, built
+# once): the benchmark (signs, values, rank correlation and speed side by side), then the opt-in test.
+CROSSCHECK_PYTHON ?= python3.11
+crosscheck: $(STAMP)
+	$(BIN)/python benchmarks/crosscheck/run.py --build --python $(CROSSCHECK_PYTHON)
+	TWOLEVEL_CROSSCHECK=1 TWOLEVEL_CROSSCHECK_PYTHON=$(CROSSCHECK_PYTHON) \
+	  $(BIN)/python -m pytest -q tests/monitor/test_crosscheck_crmonitor.py
+
 # Every lock re-resolved from pyproject.toml and requirements/tools.in: dev.lock first, then
 # each other set constrained by it (the packages they share keep dev.lock's versions).
 # $(1): extra uv options (--upgrade).
@@ -68,4 +77,4 @@ upgrade: $(BIN)/uv
 	$(MAKE) test
 
 clean:
-	rm -rf $(VENV) build *.egg-info
+	rm -rf $(VENV) .crosscheck build *.egg-info
