@@ -7,8 +7,6 @@ the MPC: d[i] = c_i − p (a known route position less the ego's), and a presenc
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 
@@ -16,14 +14,13 @@ from twolevel.compiler.driver import encode
 from twolevel.compiler.signals import AffineSignal
 from twolevel.compiler.types import Requirement
 from twolevel.milp.builder import ModelBuilder
-from twolevel.milp.highs import solve_highs
-from twolevel.milp.solution import Status
 from twolevel.monitor.robustness import robustness
 from twolevel.stl import ast
 from twolevel.stl.parser import parse
 from twolevel.stl.typecheck import map_vars
 
-from helpers.milp_systems import DT, H, PAST, T, double_integrator, random_formula, rollout
+from helpers.milp_oracle import check_optimal_robustness, check_satisfaction_of_a_fixed_trajectory
+from helpers.milp_systems import DT, H, PAST, T, double_integrator, random_formula
 
 NOW = PAST
 PIDS = ("a", "b", "c")
@@ -75,41 +72,16 @@ def _monitor(f, p, v, anchor, present):
 @pytest.mark.parametrize("seed", SEEDS)
 def test_satisfaction_of_a_fixed_trajectory_matches_the_monitor(seed: int) -> None:
     rng, f, p_past, v_past, anchor, present = _case(seed)
-    acc = rng.uniform(-2, 2, H)
-    p_fut, v_fut = rollout(p_past[-1], v_past[-1], acc)
-    if np.abs(p_fut).max() > 9.5:
-        pytest.skip("trajectory leaves the bounds")
-    p, v = np.concatenate([p_past, p_fut]), np.concatenate([v_past, v_fut])
-    rho = _monitor(f, p, v, anchor, present)
-    if abs(rho) < 1e-3 or math.isinf(rho):
-        pytest.skip("too close to the boundary, or infinite")
-    b = ModelBuilder()
-    pb, vb, ab, sig = _signals(b, p_past, v_past, anchor, present)
-    enc = encode(b, [Requirement("r", f, (NOW,))], sig, DT, mode="satisfaction")
-    assert not enc.diagnostics or all(d.code == "MIL503" for d in enc.diagnostics)
-    m = b.build()
-    m.lb[ab.idx] = m.ub[ab.idx] = acc
-    sol = solve_highs(m)
-    assert (sol.status is Status.OPTIMAL) == (rho >= 1e-4), (f, rho, sol.status)
+    check_satisfaction_of_a_fixed_trajectory(rng, f, (NOW,), p_past, v_past,
+                                             lambda b: _signals(b, p_past, v_past, anchor, present),
+                                             lambda p, v: _monitor(f, p, v, anchor, present))
 
 
 @pytest.mark.parametrize("seed", SEEDS)
 def test_optimal_robustness_equals_the_monitor_of_the_plan(seed: int) -> None:
-    rng, f, p_past, v_past, anchor, present = _case(seed)
-    b = ModelBuilder()
-    pb, vb, ab, sig = _signals(b, p_past, v_past, anchor, present)
-    enc = encode(b, [Requirement("r", f, (NOW,))], sig, DT, mode="robustness")
-    m = b.build()
-    sol = solve_highs(m, mip_gap=1e-9, options={"mip_abs_gap": 1e-9})
-    if enc.infeasible:
-        assert sol.status is Status.INFEASIBLE
-        return
-    assert sol.status is Status.OPTIMAL
-    x = sol.x
-    rho = _monitor(f, np.concatenate([p_past, x[pb.idx]]), np.concatenate([v_past, x[vb.idx]]), anchor, present)
-    if math.isinf(rho):
-        pytest.skip("infinite robustness (trivially true or false formula)")
-    assert x[enc.rho] == pytest.approx(rho, abs=1e-6), f
+    _, f, p_past, v_past, anchor, present = _case(seed)
+    check_optimal_robustness(f, (NOW,), p_past, v_past, lambda b: _signals(b, p_past, v_past, anchor, present),
+                             lambda p, v: _monitor(f, p, v, anchor, present))
 
 
 def test_an_absent_participant_costs_no_binary() -> None:
