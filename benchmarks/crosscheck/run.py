@@ -49,6 +49,9 @@ import cases as cc  # noqa: E402
 VENV = cc.ROOT / ".crosscheck" / "venv"
 VENV_PYTHON = VENV / "bin" / "python"
 REQUIREMENTS = cc.ROOT / "requirements" / "crosscheck.txt"
+TORCH_INDEX = "https://download.pytorch.org/whl/cpu"
+"""Where torch's CPU build comes from (an index given for torch alone: for every other package
+pip would ask it too)."""
 SIDE = Path(__file__).resolve().with_name("crmonitor_side.py")
 MISSING = 3
 
@@ -64,7 +67,9 @@ def build_venv(python: str = "python3.11") -> tuple[Path | None, str]:
     if shutil.which(python) is None:
         return None, f"{python} not found (crmonitor needs Python 3.10 or 3.11: --python PATH)"
     shutil.rmtree(VENV, ignore_errors=True)
+    torch = next(line for line in REQUIREMENTS.read_text().splitlines() if line.startswith("torch=="))
     for cmd in ([python, "-m", "venv", str(VENV)],
+                [str(VENV_PYTHON), "-m", "pip", "install", "--quiet", "--no-deps", "--index-url", TORCH_INDEX, torch],
                 [str(VENV_PYTHON), "-m", "pip", "install", "--quiet", "-r", str(REQUIREMENTS)],
                 [str(VENV_PYTHON), "-m", "pip", "check"]):
         proc = subprocess.run(cmd, capture_output=True, text=True)
@@ -167,7 +172,7 @@ def main(argv: list[str]) -> int:
     print(f"signs agree on {agree} of {total} steps ({100.0 * agree / max(total, 1):.2f} %) over "
           f"{len(rows) // len(cc.RULES)} drives x {len(cc.RULES)} rules; crmonitor imports in "
           f"{res['crmonitor']['import_s']:.1f} s")
-    print(f"\nCPU time [ms] per drive of {rows[0]['steps']} steps, the rules {', '.join(cc.RULES)}: twolevel "
+    print(f"\nCPU time [ms] per drive of {res['speed'][0]['steps']} steps, the rules {', '.join(cc.RULES)}: twolevel "
           "(signals from its world, then the pack) beside crmonitor (its world, then the rules)")
     print(f"{'case':<18} {'vehicles':>8} {'signals':>8} {'pack':>7} {'cr world':>9} {'cr rules':>9} "
           f"{'x rules':>8} {'x all':>7}")

@@ -156,7 +156,6 @@ class CriticalityMetrics(_Serialisable):
     t_min_ttc_any_s: float
 
 
-
 @dataclass(frozen=True)
 class NearbyMetrics(_Serialisable):
     """Number of vehicles within r_near."""
