@@ -140,7 +140,7 @@ def test_batched_participant_signals_equal_the_reference() -> None:
     got = sense(w, 0.0, dt, Memory.fresh(w), others, pts[..., 0], pts[..., 1], psi, v, np.zeros((K, T)),
                 np.zeros((K, T)))
     ids = [w.parts.ids[i] for i in others.index]
-    assert "car4" not in ids and len(ids) == 5  # beyond r_near = 40 m
+    assert "car4" in ids  # sensed (within the sensing range) but beyond r_near = 40 m: never present
     for k in range(K):
         log = TrafficLog(others.x.T, others.y.T, others.psi.T, others.v.T, np.ones((T, others.n), bool),
                          w.parts.length[others.index], w.parts.width[others.index])
@@ -152,3 +152,4 @@ def test_batched_participant_signals_equal_the_reference() -> None:
     assert (got["cut_in[car1]"] > 0).any() and (got["precedes[car0]"] > 0).any()
     assert (got["in_same_lane[car3]"] < 0).all() and (got["in_same_lane[car1]"] > 0).any()
     assert (got["d_lon[car2]"] < 0).all() and (got["present[car2]"] == np.inf).any()
+    assert (got["present[car4]"] == -np.inf).all() and (got["d_lon[car4]"] == np.inf).all()
