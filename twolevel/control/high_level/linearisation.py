@@ -24,6 +24,7 @@ from twolevel.control.high_level.guards import (Pass, RssTerminal, TerminalStop,
                                                 stop_lines, terminal_stop)
 from twolevel.control.high_level.reference import reference, reference_controls, wrap_to
 from twolevel.control.high_level.settings import MPCSettings
+from twolevel.control.high_level.steering import steering_bound, steering_reference, steering_weight
 from twolevel.control.planner import PreviousPlan
 from twolevel.models import bicycle
 from twolevel.models.params import BicycleParams
@@ -50,7 +51,10 @@ class StepData:
     (:func:`twolevel.control.high_level.guards.terminal_stop`, inactive when no line applies); ``delta_hi``
     (N,) [rad]: the steering bound per step (:func:`steering_bound`; None: the steering limit);
     ``rss``: RSS's distance to the vehicle ahead at step N (:func:`twolevel.control.high_level.guards.rss_terminal`;
-    None when the settings do not ask for it)."""
+    None when the settings do not ask for it); ``steer_ref`` (N,) [rad]: the steering that follows
+    the route's curvature, ``steer_weight`` (N,) [-]: the factor on the steering terms' weights at
+    the linearisation point's speeds (:mod:`twolevel.control.high_level.steering`; None: the
+    paper's cost, δ weighed in rad about 0)."""
 
     t: float
     x0: np.ndarray
@@ -76,6 +80,8 @@ class StepData:
     steps: np.ndarray = field(default_factory=lambda: np.zeros(0))
     H: int = 0
     rss: RssTerminal | None = None
+    steer_ref: np.ndarray | None = None
+    steer_weight: np.ndarray | None = None
 
     @property
     def N(self) -> int:
@@ -120,19 +126,6 @@ def direction_box(x0: np.ndarray, ticks: np.ndarray, dt: float, params: BicycleP
     lo = np.stack([X + dx_lo, Y + dy_lo, psi - yaw - 0.05, np.zeros(H)], axis=1)
     hi = np.stack([X + dx_hi, Y + dy_hi, psi + yaw + 0.05, v_hi + 0.1], axis=1)
     return lo, hi
-
-
-def steering_bound(v: np.ndarray, kappa: np.ndarray, params: BicycleParams) -> np.ndarray:
-    """|δ_k| bound [rad] per step at speeds ``v`` (H,) [m/s] (the linearisation point's, at least
-    the current speed, so a plan that brakes less than the last one is still bounded): the steering limit,
-    or at speed the steering of ``params.a_lat_max`` lateral acceleration (|tan δ| ≤
-    a_lat_max·l_f/v²), never below what the route's curvature ``kappa`` (H,) [1/m] needs plus a
-    margin for corrections. The plan's own speeds may exceed ``v`` (accelerating more than the
-    last plan did), so its lateral acceleration may exceed the limit by (v_plan/v)²."""
-    v2 = np.maximum(np.asarray(v, float) ** 2, 1e-9)
-    lat = np.arctan(params.a_lat_max * params.l_f / v2)
-    need = np.abs(np.arctan(params.l_f * np.asarray(kappa, float))) + 0.02
-    return np.minimum(params.delta_max, np.maximum(lat, need))
 
 
 def shifted(prev: PreviousPlan, x0: np.ndarray, periods: np.ndarray, dt: float, params: BicycleParams
@@ -248,10 +241,12 @@ def prepare_step(
         rss = rss_terminal(hc, ref.front, ws.response, s0=s0, v0=float(x0[3]), steps=steps, H=H, v_lo=v_lo, v_hi=hi[:, 3],
                            v_bar=xs_bar[1:, 3], margin=ws.D_safe, a_min=params.a_min, lateral=ref.lateral,
                            sides=ref.sides, beside=ref.beside, e0=ref.e0, due=ref.due)
+    kappa = route.curvature_at(s_ref[:-1])
+    v_bar = np.maximum(xs_bar[:-1, 3], x0[3])
+    steer_weight = steering_weight(v_bar, params.l_f) if settings.lateral_weight else None
     return StepData(t, x0, np.asarray(u_prev, float), xs_bar, us_bar, A, B, c, omega, s_ref, s_bar, h_bar, p_bar,
-                    lo, hi, hc, width, e_lo, e_hi, term, steering_bound(np.maximum(xs_bar[:-1, 3], x0[3]),
-                                                                        route.curvature_at(s_ref[:-1]), params),
-                    steps, H, rss)
+                    lo, hi, hc, width, e_lo, e_hi, term, steering_bound(v_bar, kappa, params), steps, H, rss,
+                    steering_reference(kappa, params) if settings.lateral_weight else None, steer_weight)
 
 
 def history_length(history: Mapping[str, np.ndarray] | None, names: set[str], depth: int) -> int:

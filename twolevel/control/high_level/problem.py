@@ -19,7 +19,10 @@ vectorised collision_free blocks), over the fine part only.
 Cost (paper): Σ_k w_u‖u_k‖² + w_du‖u_k − u_{k−1}‖² + Σ_i w_i (ζ_{k,i} − ω_{k,i})², as residuals,
 over every step of the look-ahead, each step's terms weighed by its length in periods (a coarse
 step of 0.5 s counts as five of the paper's: the sum stays a time integral, and a plan gains
-nothing by putting a manoeuvre off into the coarse part).
+nothing by putting a manoeuvre off into the coarse part). With ``settings.lateral_weight`` the
+steering's terms are δ_k − δ_ref,k (the steering that follows the route) and δ_k − δ_{k−1},
+weighed by the lateral acceleration they cause at the step's speed
+(:mod:`twolevel.control.high_level.steering`).
 
 Signals of the trace (past samples from ``history``, then now, then k = 1..H: the rules see the
 fine part, in steps of dt): constants for what is known at solve time,
@@ -420,10 +423,19 @@ def _cost(model: MilpModel, step: StepData, lay: Layout, w: Weights) -> None:
     g = np.zeros(2 * nu + 4 * H)
     g[nu:nu + 2] = step.u_prev
     g[2 * nu:] = step.omega.ravel()
-    model.P = cs.P
-    model.q = model.q - 2.0 * (cs.FtW @ g)
-    model.c0 = model.c0 + float(cs.w @ (g * g))
-    model.residuals = Residuals(cs.F, g, cs.w)
+    w_rows, P, FtW = cs.w, cs.P, cs.FtW
+    if step.steer_weight is not None:  # the steering in the lateral acceleration it causes
+        g[0:nu:2] = step.steer_ref
+        scale = np.ones_like(cs.w)
+        scale[0:nu:2] = scale[nu:2 * nu:2] = step.steer_weight
+        w_rows = cs.w * scale
+        FtW = cs.F.T.multiply(w_rows).tocsr()
+        P = sp.triu(FtW @ cs.F * 2.0).tocsc()
+        P.sum_duplicates()
+    model.P = P
+    model.q = model.q - 2.0 * (FtW @ g)
+    model.c0 = model.c0 + float(w_rows @ (g * g))
+    model.residuals = Residuals(cs.F, g, w_rows)
 
 
 def set_cost(model: MilpModel, step: StepData, lay: Layout, w: Weights) -> None:

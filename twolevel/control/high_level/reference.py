@@ -20,6 +20,7 @@ import numpy as np
 from twolevel.control.high_level.guards import (BESIDE_FROM, LATERAL_MARGIN, Front, Pass, beside_steps,
                                                 drivable_band, free_sides, front_of, stop_lines)
 from twolevel.control.high_level.settings import MPCSettings
+from twolevel.control.high_level.steering import steering_reference
 from twolevel.models.params import BicycleParams
 from twolevel.world.assumptions import ResponseBounds, safe_speed
 from twolevel.world.geometry import Route
@@ -67,7 +68,7 @@ def reference_controls(route_kappa: np.ndarray, v_ref: np.ndarray, steps: np.nda
     """The controls (N, 2) [δ rad, a m/s²] that follow the route's curvature ``route_kappa`` (N,)
     [1/m] at the reference speeds ``v_ref`` (N+1,) [m/s] over steps of ``steps`` (N,) [s] (or one
     length), within the bicycle's limits."""
-    delta = np.clip(np.arctan(params.l_f * route_kappa), -params.delta_max, params.delta_max)
+    delta = steering_reference(route_kappa, params)
     acc = np.clip(np.diff(v_ref) / steps, params.a_min, params.a_max)
     return np.stack([delta, acc], axis=1)
 

@@ -94,6 +94,10 @@ class MPCSettings:
     """[m] How far before such a line the plan stops."""
     band: bool = True
     """Keep the lateral offset within the lanes that run the route's way."""
+    lateral_weight: bool = True
+    """Weigh the steering terms of the cost by the lateral acceleration they cause, about the
+    steering that follows the route (:mod:`twolevel.control.high_level.steering`); False: the
+    paper's cost (δ in rad about 0), which weaves at motorway speed."""
     rss: bool = True
     """Keep RSS's safe distance (plus the world's D_safe) behind the vehicle ahead within the
     sensing range from the last fine step to the end of the look-ahead (conservative linear rows,

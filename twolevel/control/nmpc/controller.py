@@ -243,7 +243,10 @@ class NmpcController:
             A = 0.5 * (hc.length[order] + self.world.ego.length) + d
             B = 0.5 * (hc.width[order] + self.world.ego.width) + d
             shapes[:q] = np.column_stack([np.cos(psi), np.sin(psi), 1.0 / A, 1.0 / B])
-        return self.problem.layout.pack(x0, step.u_prev, step.omega, vb, stop, centres, shapes)
+        steer = None
+        if step.steer_weight is not None:  # the steering in the lateral acceleration it causes
+            steer = np.column_stack([step.steer_ref[:H], step.steer_weight[:H]])
+        return self.problem.layout.pack(x0, step.u_prev, step.omega, vb, stop, centres, shapes, steer)
 
     def _initial_guess(self, t: float, step: StepData, x0: np.ndarray
                        ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, str]:

@@ -16,7 +16,7 @@ Models (``F`` over one control period dt [s], input held):
 
 Parameter vector ``p`` (:class:`ParamLayout`): x0 (nx), u_prev (2), ω (H, 4), speed bound (H,),
 stop bound (H, 4) = (n_x, n_y, b, c) for nᵀp_k + c·v_k² ≤ b, obstacle centres (N, H, 2) and shapes
-(N, 4) = (cos ψ_i, sin ψ_i, 1/A_i, 1/B_i).
+(N, 4) = (cos ψ_i, sin ψ_i, 1/A_i, 1/B_i), the steering (H, 2) = (δ_ref,k, weight factor_k).
 
 Constraints ``g``, per step k = 1..H in this order (so duals shift with the plan):
 dynamics (nx, = 0); v_k ≤ vbound_k; nᵀp_k + c_k·v_k² ≤ b_k (behind a stop line
@@ -25,7 +25,9 @@ and able to stop before it: c = 1/(2·deceleration); n = 0, b = 1, c = 0 when no
 Minkowski sum of the two boxes grown by the distance d, scales like a distance, and is smooth.
 
 Cost (the paper's, as :mod:`twolevel.control.high_level.problem`): Σ_k w_u‖u_k‖² + w_du‖u_k − u_{k−1}‖²
-+ Σ_{k=1..H} Σ_i w_i (ζ_{k,i} − ω_{k,i})².
++ Σ_{k=1..H} Σ_i w_i (ζ_{k,i} − ω_{k,i})², the steering's terms δ_k − δ_ref,k and δ_k − δ_{k−1}
+weighed by the step's factor (:mod:`twolevel.control.high_level.steering`: the lateral
+acceleration they cause; δ_ref = 0 and factor 1 give the paper's cost).
 """
 
 from __future__ import annotations
@@ -80,13 +82,16 @@ class ParamLayout:
 
     @property
     def size(self) -> int:
-        return self.nx + 2 + 4 * self.H + self.H + 4 * self.H + 2 * self.N * self.H + 4 * self.N
+        return self.nx + 2 + 4 * self.H + self.H + 4 * self.H + 2 * self.N * self.H + 4 * self.N + 2 * self.H
 
     def pack(self, x0: np.ndarray, u_prev: np.ndarray, omega: np.ndarray, vbound: np.ndarray, stop: np.ndarray,
-             centres: np.ndarray, shapes: np.ndarray) -> np.ndarray:
-        """One parameter vector from its blocks (shapes as in the module docstring)."""
+             centres: np.ndarray, shapes: np.ndarray, steer: np.ndarray | None = None) -> np.ndarray:
+        """One parameter vector from its blocks (shapes as in the module docstring; ``steer``
+        None: the paper's steering terms, δ_ref = 0 and factor 1)."""
+        if steer is None:
+            steer = np.tile([0.0, 1.0], (self.H, 1))
         return np.concatenate([np.ravel(x0), np.ravel(u_prev), np.ravel(omega), np.ravel(vbound), np.ravel(stop),
-                               np.ravel(centres), np.ravel(shapes)]).astype(float)
+                               np.ravel(centres), np.ravel(shapes), np.ravel(steer)]).astype(float)
 
 
 @dataclass(frozen=True, eq=False)
@@ -150,6 +155,7 @@ class NmpcProblem:
         stop = ca.reshape(take(4 * H), 4, H)
         cen = take(2 * N * H)  # (N, H, 2) row-major
         shp = ca.reshape(take(4 * N), 4, N)
+        steer = ca.reshape(take(2 * H), 2, H)  # column k = (δ_ref,k, weight factor_k)
 
         W = ca.MX.sym("w", self.n_w)
         X = ca.reshape(W[: H * nx], nx, H)
@@ -164,7 +170,9 @@ class NmpcProblem:
             du = uk - (u_prev if k == 0 else U[:, k - 1])
             zeta = ca.vertcat(X[0, k], X[1, k], X[2, k], X[3, k])
             e = zeta - omega[:, k]
-            J += weights.u * ca.sumsqr(uk) + weights.du * ca.sumsqr(du) + ca.dot(w_track, e * e)
+            f_k = steer[1, k]
+            J += (weights.u * ((uk[0] - steer[0, k]) ** 2 * f_k + uk[1] ** 2)
+                  + weights.du * (du[0] ** 2 * f_k + du[1] ** 2) + ca.dot(w_track, e * e))
             gk = [Xn[:, k] - X[:, k], vb[k] - X[3, k], stop[2, k] - stop[0, k] * X[0, k] - stop[1, k] * X[1, k] - stop[3, k] * X[3, k] ** 2]
             for i in range(N):
                 base = 2 * (i * H + k)

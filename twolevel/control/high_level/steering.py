@@ -1,0 +1,67 @@
+"""The steering's share of the cost and its bound, in the lateral acceleration the steering causes.
+
+The paper weighs the inputs u = [δ, a] in their own units (rad, m/s²) with unit weights. A
+steering angle δ turns the kinematic bicycle with lateral acceleration v²·tan δ/l_f: at walking
+pace a radian is little, at 25 m/s 0.01 rad is 3 m/s². Weighed as radians, the steering is
+almost free at speed, so the plan corrects an offset with as much steering as its bound allows
+and the closed loop on the detailed plant — whose yaw follows the steering ≈ 0.15–0.2 s late at
+25–35 m/s (tyre slip, yaw inertia) with ≈ 0.8 of the bicycle's gain (its wheelbase a + b is
+longer than the paper's l_f) — becomes a relay: a 2 s weave of ±0.5 m that never settles
+(docs/architecture.md, "Lateral stability").
+
+Here the steering terms are weighed by the lateral acceleration they cause: the residuals of
+‖δ_k − δ_ref,k‖² and ‖δ_k − δ_{k−1}‖² carry the weight :func:`steering_weight` =
+1 + (v_k²/l_f)² (per radian, squared: the paper's weight plus that of the lateral acceleration in
+m/s², as the acceleration a is weighed), at the step's speed v_k. ``δ_ref`` is the steering that
+follows the route's curvature (:func:`steering_reference`), so bends cost nothing extra. The
+closed loop then behaves like the unit-weight LQR of a double integrator in the lateral offset
+(natural frequency ≈ 1 rad/s, damping ≈ 0.7): no saturation, margin for the plant's lag.
+Functions take numpy arrays or casadi symbols (plain arithmetic).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from twolevel.models.params import BicycleParams
+
+__all__ = ["lateral_gain", "steering_weight", "steering_reference", "steering_bound"]
+
+CORRECTION = 0.02
+"""[rad] The steering margin beyond what the route's curvature needs, at low speed."""
+
+
+def lateral_gain(v: Any, l_f: float) -> Any:
+    """d(lateral acceleration)/dδ of the kinematic bicycle at δ = 0: v²/l_f [m/s² per rad] at
+    speed ``v`` [m/s]."""
+    return v * v / l_f
+
+
+def steering_weight(v: Any, l_f: float) -> Any:
+    """The factor [-] on the steering terms' unit weights at speed ``v`` [m/s]: 1 (the paper's
+    weight on δ in rad) plus the squared lateral gain (the lateral acceleration in m/s²)."""
+    g = lateral_gain(v, l_f)
+    return 1.0 + g * g
+
+
+def steering_reference(kappa: np.ndarray, params: BicycleParams) -> np.ndarray:
+    """The steering [rad] that follows a path of curvature ``kappa`` [1/m], within the limit."""
+    return np.clip(np.arctan(params.l_f * np.asarray(kappa, float)), -params.delta_max, params.delta_max)
+
+
+def steering_bound(v: np.ndarray, kappa: np.ndarray, params: BicycleParams) -> np.ndarray:
+    """|δ_k| bound [rad] per step at speeds ``v`` (H,) [m/s] (the linearisation point's, at least
+    the current speed, so a plan that brakes less than the last one is still bounded): the steering limit,
+    or at speed the steering of ``params.a_lat_max`` lateral acceleration (|tan δ| ≤
+    a_lat_max·l_f/v²), never below what the route's curvature ``kappa`` (H,) [1/m] needs plus a
+    margin for corrections: :data:`CORRECTION`, at most the steering of half ``a_lat_max`` (at
+    35 m/s 0.02 rad would be 11.6 m/s², beyond the tyres). The plan's own speeds may exceed
+    ``v`` (accelerating more than the last plan did), so its lateral acceleration may exceed the
+    limit by (v_plan/v)²."""
+    v2 = np.maximum(np.asarray(v, float) ** 2, 1e-9)
+    lat = np.arctan(params.a_lat_max * params.l_f / v2)
+    margin = np.minimum(CORRECTION, np.arctan(0.5 * params.a_lat_max * params.l_f / v2))
+    need = np.abs(steering_reference(kappa, params)) + margin
+    return np.minimum(params.delta_max, np.maximum(lat, need))
