@@ -88,10 +88,8 @@ def test_a_lane_change_at_30_m_s_settles_in_the_new_lane(tmp_path: Path) -> None
 
 @pytest.mark.slow
 def test_the_nmpc_baseline_no_longer_spins_out_at_speed(tmp_path: Path) -> None:
-    """The NMPC (the paper's 1 s horizon) at 30 m/s: it spun out at 25 m/s with δ in rad; now
-    it keeps its heading within 3° and its lane, and the offset decays (its short horizon damps
-    the lateral mode weakly: a slow decay, no sustained oscillation)."""
+    """The NMPC (the paper's 1 s horizon) at 30 m/s: with δ in rad it spun out at 25 m/s; now it
+    keeps its heading within 3° and its lane and settles like the MPC."""
     t, e, psi, _ = lateral(tmp_path, "weave_30", controller="nmpc")
     assert np.max(np.abs(psi)) < np.radians(3.0) and np.max(np.abs(e)) <= 0.5 + 1e-6
-    assert amplitude(t, e) < SETTLED
-    assert np.max(np.abs(e[t >= 10.0])) < 0.5 * np.max(np.abs(e[(t >= 2.0) & (t < 10.0)])) + SETTLED
+    assert settle_time(t, e) <= 10.0 and amplitude(t, e) < SETTLED
