@@ -151,17 +151,18 @@ def test_stops_at_the_goal(tmp_path) -> None:
 
 def test_control_signals_follow_the_timing_convention(tmp_path) -> None:
     # sample k carries the control applied from k on (world/provided.py): a rule on delta now
-    # constrains the plan's first control u_0, not the previous step's u_{-1} (which it used to)
+    # constrains the plan's first control u_0, not the previous step's u_{-1} (which it used to);
+    # a window of one period (0.1 s: the interval is in seconds) reaches sample 1, the control u_1
     w = make_world(tmp_path, "highway.yaml", HIGHWAY_EGO % (0.0, 10.0, 10.0), HIGHWAY_ROUTE)
     rs = rules(tmp_path, "input float delta\ninput float a\nnudge = (delta >= 0.02) and (a <= -0.5);\n"
-                         "then = always[1:1] (delta <= 0.0);\n")
+                         "then = always[0.1:0.1] (delta <= 0.0);\n")
     ctrl = controller(w, [rs])
     hist = {"delta": np.array([0.0]), "a": np.array([0.0])}
     r = ctrl.solve((w.ego.x, w.ego.y, w.ego.psi, w.ego.v), 0.0, None, hist)
     assert r.ok and not r.message.startswith("recovering"), r.message
     assert r.controls[0, 0] >= 0.02 - 1e-6 and r.controls[0, 1] <= -0.5 + 1e-6   # now = u_0
     assert r.controls[1, 0] <= 1e-6                                              # sample 1 = u_1
-    assert r.rule_robustness["nudge"] >= -1e-6
+    assert r.rule_robustness["nudge"] >= -1e-6 and r.rule_robustness["then"] >= -1e-6
 
 
 def test_plans_keep_within_the_lateral_acceleration_limit(tmp_path) -> None:
