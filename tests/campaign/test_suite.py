@@ -5,6 +5,7 @@ annotations, -k selection, --failed-first and the run directories kept for failu
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import pytest
@@ -142,3 +143,15 @@ def test_the_same_seed_gives_the_same_results(tmp_path: Path) -> None:
         outs.append([{key: v for key, v in c.items() if key not in ("wall_s", "run_dir")} for c in data["cases"]])
         assert all(c["seed"] == 5 for c in data["cases"])
     assert outs[0] == outs[1]
+
+
+def test_keywords_do_not_read_the_folders_above_the_suite(tmp_path: Path) -> None:
+    # regression: -k matched the whole path, so a suite checked out below a folder named like a
+    # word ("wt-lateral" for "late") selected nothing with "not late"
+    suite = tmp_path / "calculated" / "suite"
+    shutil.copytree(SUITE, suite)
+    cases, _ = discover([str(suite)])
+    assert [_short(c.id) for c in select(cases, "goal_at and not late")] == ["goal_at.yaml", "goal_at.yaml::far"]
+    assert select(cases, "calculated") == [] and len(select(cases, "suite")) == len(cases)
+    one, _ = discover([str(suite / "goal_at.yaml")])
+    assert [c.keywords for c in one] == ["goal_at.yaml", "goal_at.yaml::far", "goal_at.yaml::late"]

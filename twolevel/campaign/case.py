@@ -30,7 +30,8 @@ CONCRETE_FILE = "scenario.yaml"
 class Case:
     """What to run: ``scenario`` (a path), ``parameters`` (name → value; the rest nominal), the
     ``seed`` (None: the scenario's), a criteria override (``expect``, as YAML data), and an id
-    unique in its campaign (``path`` or ``path::variant``; ``#0007`` for a campaign's samples)."""
+    unique in its campaign (``path`` or ``path::variant``; ``#0007`` for a campaign's samples),
+    and the name ``-k`` reads (``keywords``; empty: the id)."""
 
     id: str
     scenario: str
@@ -38,6 +39,7 @@ class Case:
     seed: int | None = None
     expect: Mapping[str, Any] | None = None
     variant: str = ""
+    keywords: str = ""
 
 
 @dataclass(frozen=True)

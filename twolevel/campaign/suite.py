@@ -3,7 +3,9 @@ suite — in parallel on an executor, each case judged by its criteria.
 
 Case ids are the scenario's path as given (``scenarios/cut_in.yaml``) and, for a variant,
 ``path::name``. ``-k`` selects cases as pytest does: words match as case-insensitive
-substrings of the id, combined with ``and``, ``or``, ``not`` and parentheses. With
+substrings of the case's name below the folder it was found in (that folder's own name, the
+path below it, ``::variant``; a file given by itself: its name), never of the folders above,
+so where a suite is checked out does not change what a word selects; combined with ``and``, ``or``, ``not`` and parentheses. With
 ``failed_first`` the cases that failed last time (the cache file) run first. Results come back
 in case order whatever order the workers finish in, so a suite's outputs depend only on the
 cases and the seed. Outputs: JUnit XML (:func:`junit_xml`), JSON (:func:`suite_json`), GitHub
@@ -68,18 +70,33 @@ def discover(paths: Sequence[str]) -> tuple[list[Case], list[Diagnostic]]:
         doc, _ = read_document(f)
         if doc is not None and file_kind(doc.data) == "map":
             continue
-        cases.append(Case(f, f))
+        name = _keyword_name(f, paths)
+        cases.append(Case(f, f, keywords=name))
         variants = doc.data.get("variants") if doc is not None else None
         for v in variants if isinstance(variants, list) else []:
             if isinstance(v, dict) and isinstance(v.get("name"), str):
                 params = v.get("parameters") if isinstance(v.get("parameters"), dict) else {}
                 seed = v.get("seed") if isinstance(v.get("seed"), int) else None
                 expect = v.get("expect") if isinstance(v.get("expect"), dict) else None
-                cases.append(Case(f"{f}::{v['name']}", f, dict(params), seed, expect, v["name"]))
+                cases.append(Case(f"{f}::{v['name']}", f, dict(params), seed, expect, v["name"],
+                                  f"{name}::{v['name']}"))
     if not cases and not any(d.is_error for d in diags):
         diags.append(SIM621(f"no scenario below {', '.join(paths)}", Span.whole_file(paths[0] if paths else "."),
                             hint="give scenario files (.yaml) or folders holding them"))
     return cases, diags
+
+
+def _keyword_name(file: str, paths: Sequence[str]) -> str:
+    """The part of the scenario ``file``'s path that ``-k`` reads: from the folder among ``paths``
+    that holds it (its name included), or the file's name when it was given itself."""
+    f = Path(file).resolve()
+    best = f.name
+    for p in paths:
+        root = Path(p).resolve()
+        if root.is_dir() and f.is_relative_to(root):
+            below = (Path(root.name) / f.relative_to(root)).as_posix()
+            best = below if len(below) > len(best) else best
+    return best
 
 
 _TOKEN = re.compile(r"\s*(\(|\)|[^\s()]+)")
@@ -138,7 +155,7 @@ def select(cases: Sequence[Case], expression: str | None) -> list[Case]:
             raise KeywordError(f"-k '{expression}': unexpected '{tokens[pos]}'")
         return value
 
-    return [c for c in cases if parse(c.id)]
+    return [c for c in cases if parse(c.keywords or c.id)]
 
 
 def read_cache(path: str | os.PathLike[str]) -> set[str]:
