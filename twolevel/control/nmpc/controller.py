@@ -77,7 +77,7 @@ _FAR = 1.0e3  # [m] offset of the dummy obstacles
 class NmpcOptions:
     """``max_obstacles``: obstacle slots in the NLP (fixed; nearest vehicles first) [-];
     ``max_iter``/``tol``: IPOPT's (exact Hessian); ``retry``: after a failure, solve again with the
-    L-BFGS Hessian (``retry_max_iter`` iterations) before falling back; ``max_cpu_time`` [s] per solve (None: no limit); ``warm_start``:
+    L-BFGS Hessian, then with the exact one (``retry_max_iter`` iterations each) before falling back; ``max_cpu_time`` [s] per solve (None: no limit); ``warm_start``:
     start from the previous solution shifted, with its duals (``"primal"``: without duals, IPOPT's
     cold initialisation of the multipliers); ``substeps``: internal steps per dt of the
     four-wheel model (None: its own h_int); ``expand``: build the NLP as one SX graph (None:
@@ -292,7 +292,7 @@ class NmpcController:
         name = f"nmpc-{self.model}"
         retried = len(sol.attempts) > 1
         tried = " → ".join(sol.attempts) if retried else sol.status
-        msg = f"ipopt: {tried}, {sol.iterations} iterations ({how} start{', L-BFGS retry' if retried else ''})"
+        msg = f"ipopt: {tried}, {sol.iterations} iterations ({how} start{', retried' if retried else ''})"
         if sol.success:
             X, U = pr.unpack_w(sol.w)
             states = np.vstack([x0[None, :4], X[:, :4]])

@@ -194,7 +194,7 @@ class NmpcProblem:
         if max_cpu_time is not None:
             self._opts_base["ipopt.max_cpu_time"] = max_cpu_time
         self.retry_max_iter = retry_max_iter
-        self._solvers: dict[tuple[bool, bool], Any] = {}
+        self._solvers: dict[tuple[bool, bool, bool], Any] = {}
 
         # bounds
         lo_x = np.full((H, nx), -np.inf)
@@ -216,20 +216,24 @@ class NmpcProblem:
     def n_g(self) -> int:
         return self.H * self.m
 
-    def _solver(self, warm: bool, lbfgs: bool = False) -> Any:
-        s = self._solvers.get((warm, lbfgs))
+    def _solver(self, warm: bool, lbfgs: bool = False, long: bool = False) -> Any:
+        """IPOPT for a warm or cold start, with the L-BFGS Hessian or the exact one, with the
+        retry's iteration budget (L-BFGS and ``long``) or the first attempt's."""
+        s = self._solvers.get((warm, lbfgs, long))
         if s is None:
             import casadi as ca
 
             opts = dict(self._opts_base)
             if lbfgs:
                 opts.update({"ipopt.hessian_approximation": "limited-memory", "ipopt.max_iter": self.retry_max_iter})
+            elif long:
+                opts["ipopt.max_iter"] = self.retry_max_iter
             if warm:
                 opts.update({"ipopt.warm_start_init_point": "yes", "ipopt.warm_start_bound_push": 1e-6,
                              "ipopt.warm_start_mult_bound_push": 1e-6, "ipopt.warm_start_slack_bound_push": 1e-6,
                              "ipopt.mu_init": 1e-4})
             s = ca.nlpsol(f"nmpc_{self.model}", "ipopt", self._nlp, opts)
-            self._solvers[(warm, lbfgs)] = s
+            self._solvers[(warm, lbfgs, long)] = s
         return s
 
     def roll(self, x0: np.ndarray, U: np.ndarray) -> np.ndarray:
@@ -251,26 +255,32 @@ class NmpcProblem:
         """One IPOPT solve from ``w0``; with duals given, IPOPT's warm-start initialisation is used.
         With the exact Hessian first; if that fails and ``retry``, again from the same point with
         the limited-memory (L-BFGS) Hessian, which gets through the saddle-like points the exact
-        Hessian crawls at (a stop line ahead with the tracking cost pulling forward). Iterations
-        and time add up. Numerical failures come back as an unsuccessful :class:`NlpSolution`,
+        Hessian crawls at (a stop line ahead with the tracking cost pulling forward), and if that
+        fails too, with the exact Hessian and L-BFGS's iteration budget: with the steering's rate
+        weighed by the lateral jerk the cost is ill-conditioned at speed, L-BFGS stalls and a
+        sudden swerve (a stopped vehicle entering the 1 s horizon) takes the exact Hessian ≈ 35
+        iterations. Iterations and time add up. Numerical failures come back as an unsuccessful :class:`NlpSolution`,
         never raised."""
         first = self._attempt(w0, p, lam_g0, lam_x0, False)
         if first.success or not retry:
             return first
-        second = self._attempt(w0, p, lam_g0, lam_x0, True)
-        return NlpSolution(second.w, second.lam_g, second.lam_x, second.cost, second.status,
-                           first.iterations + second.iterations, first.solve_ms + second.solve_ms, second.success,
-                           (first.status, second.status))
+        tries = [first, self._attempt(w0, p, lam_g0, lam_x0, True)]
+        if not tries[-1].success:
+            tries.append(self._attempt(w0, p, lam_g0, lam_x0, False, long=True))
+        last = tries[-1]
+        return NlpSolution(last.w, last.lam_g, last.lam_x, last.cost, last.status,
+                           sum(a.iterations for a in tries), sum(a.solve_ms for a in tries), last.success,
+                           tuple(a.status for a in tries))
 
     def _attempt(self, w0: np.ndarray, p: np.ndarray, lam_g0: np.ndarray | None, lam_x0: np.ndarray | None,
-                 lbfgs: bool) -> NlpSolution:
+                 lbfgs: bool, long: bool = False) -> NlpSolution:
         warm = lam_g0 is not None and lam_x0 is not None
         args: dict[str, Any] = {"x0": w0, "p": p, "lbx": self.lbx, "ubx": self.ubx, "lbg": self.lbg, "ubg": self.ubg}
         if warm:
             args.update({"lam_g0": lam_g0, "lam_x0": lam_x0})
         t0 = time.perf_counter()
         try:
-            solver = self._solver(warm, lbfgs)
+            solver = self._solver(warm, lbfgs, long)
             sol = solver(**args)
             stats = solver.stats()
         except Exception as exc:  # casadi raises on evaluation errors (NaN/Inf in a function)
