@@ -58,6 +58,7 @@ from twolevel.control.codes import MIL515, MIL530
 from twolevel.control.high_level.guards import stop_lines
 from twolevel.control.high_level.linearisation import StepData, prepare_step, sensing_bound
 from twolevel.control.high_level.settings import MPCSettings
+from twolevel.control.high_level.steering import steering_reference
 from twolevel.control.nmpc.nlp import MODELS, NlpSolution, NmpcProblem
 from twolevel.control.planner import (EgoState, PlanResult, PlanStatus, Snapshot, WorldState, planner_of_world,
                                       stop_memory_of)
@@ -245,7 +246,9 @@ class NmpcController:
             shapes[:q] = np.column_stack([np.cos(psi), np.sin(psi), 1.0 / A, 1.0 / B])
         steer = None
         if step.steer_weight is not None:  # the steering in the lateral acceleration it causes
-            steer = np.column_stack([step.steer_ref[:H], step.steer_weight[:H]])
+            before = steering_reference(route.curvature_at(np.array([step.s_ref[0] - float(x0[3]) * dt])), self.params)
+            ref = step.steer_ref[:H]
+            steer = np.column_stack([ref, np.concatenate([before, ref[:-1]]), step.steer_weight[:H]])
         return self.problem.layout.pack(x0, step.u_prev, step.omega, vb, stop, centres, shapes, steer)
 
     def _initial_guess(self, t: float, step: StepData, x0: np.ndarray

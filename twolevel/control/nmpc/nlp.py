@@ -16,7 +16,8 @@ Models (``F`` over one control period dt [s], input held):
 
 Parameter vector ``p`` (:class:`ParamLayout`): x0 (nx), u_prev (2), ω (H, 4), speed bound (H,),
 stop bound (H, 4) = (n_x, n_y, b, c) for nᵀp_k + c·v_k² ≤ b, obstacle centres (N, H, 2) and shapes
-(N, 4) = (cos ψ_i, sin ψ_i, 1/A_i, 1/B_i), the steering (H, 2) = (δ_ref,k, weight factor_k).
+(N, 4) = (cos ψ_i, sin ψ_i, 1/A_i, 1/B_i), the steering (H, 3) = (δ_ref,k, δ_ref,k−1, weight
+factor_k) (δ_ref,−1: the route's steering one period ago).
 
 Constraints ``g``, per step k = 1..H in this order (so duals shift with the plan):
 dynamics (nx, = 0); v_k ≤ vbound_k; nᵀp_k + c_k·v_k² ≤ b_k (behind a stop line
@@ -26,9 +27,10 @@ Minkowski sum of the two boxes grown by the distance d, scales like a distance, 
 
 Cost (the paper's, as :mod:`twolevel.control.high_level.problem`): Σ_k w_u‖u_k‖² + w_du‖u_k − u_{k−1}‖²
 + Σ_{k=1..H} Σ_i w_i (ζ_{k,i} − ω_{k,i})², with δ_k − δ_ref,k (the steering that follows the
-route) and the steering's rate δ_k − δ_{k−1} weighed by the step's factor
-(:mod:`twolevel.control.high_level.steering`: the lateral jerk it causes; δ_ref = 0 and factor
-1 give the paper's cost). Unlike the MPC's 5 s look-ahead, the baseline's 1 s horizon does not
+route) and the steering's rate about the route's, (δ_k − δ_{k−1}) − (δ_ref,k − δ_ref,k−1), weighed
+by the step's factor (:mod:`twolevel.control.high_level.steering`: the lateral jerk it causes;
+a bend's onset costs nothing, else the plan entered a bend late: 5 cm off at 8 m/s; δ_ref = 0
+and factor 1 give the paper's cost). Unlike the MPC's 5 s look-ahead, the baseline's 1 s horizon does not
 weigh the lateral acceleration itself: within 1 s an offset's correction hardly pays, so the
 plan would hardly steer and the offset would swing slowly (±5 cm after 30 s at 15 m/s).
 """
@@ -85,14 +87,14 @@ class ParamLayout:
 
     @property
     def size(self) -> int:
-        return self.nx + 2 + 4 * self.H + self.H + 4 * self.H + 2 * self.N * self.H + 4 * self.N + 2 * self.H
+        return self.nx + 2 + 4 * self.H + self.H + 4 * self.H + 2 * self.N * self.H + 4 * self.N + 3 * self.H
 
     def pack(self, x0: np.ndarray, u_prev: np.ndarray, omega: np.ndarray, vbound: np.ndarray, stop: np.ndarray,
              centres: np.ndarray, shapes: np.ndarray, steer: np.ndarray | None = None) -> np.ndarray:
         """One parameter vector from its blocks (shapes as in the module docstring; ``steer``
         None: the paper's steering terms, δ_ref = 0 and factor 1)."""
         if steer is None:
-            steer = np.tile([0.0, 1.0], (self.H, 1))
+            steer = np.tile([0.0, 0.0, 1.0], (self.H, 1))
         return np.concatenate([np.ravel(x0), np.ravel(u_prev), np.ravel(omega), np.ravel(vbound), np.ravel(stop),
                                np.ravel(centres), np.ravel(shapes), np.ravel(steer)]).astype(float)
 
@@ -158,7 +160,7 @@ class NmpcProblem:
         stop = ca.reshape(take(4 * H), 4, H)
         cen = take(2 * N * H)  # (N, H, 2) row-major
         shp = ca.reshape(take(4 * N), 4, N)
-        steer = ca.reshape(take(2 * H), 2, H)  # column k = (δ_ref,k, weight factor_k)
+        steer = ca.reshape(take(3 * H), 3, H)  # column k = (δ_ref,k, δ_ref,k−1, weight factor_k)
 
         W = ca.MX.sym("w", self.n_w)
         X = ca.reshape(W[: H * nx], nx, H)
@@ -173,9 +175,9 @@ class NmpcProblem:
             du = uk - (u_prev if k == 0 else U[:, k - 1])
             zeta = ca.vertcat(X[0, k], X[1, k], X[2, k], X[3, k])
             e = zeta - omega[:, k]
-            f_k = steer[1, k]
+            turn = du[0] - (steer[0, k] - steer[1, k])  # the steering's rate about the route's
             J += (weights.u * ((uk[0] - steer[0, k]) ** 2 + uk[1] ** 2)
-                  + weights.du * (du[0] ** 2 * f_k + du[1] ** 2) + ca.dot(w_track, e * e))
+                  + weights.du * (turn ** 2 * steer[2, k] + du[1] ** 2) + ca.dot(w_track, e * e))
             gk = [Xn[:, k] - X[:, k], vb[k] - X[3, k], stop[2, k] - stop[0, k] * X[0, k] - stop[1, k] * X[1, k] - stop[3, k] * X[3, k] ** 2]
             for i in range(N):
                 base = 2 * (i * H + k)
