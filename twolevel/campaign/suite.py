@@ -5,8 +5,8 @@ Case ids are the scenario's path as given (``scenarios/cut_in.yaml``) and, for a
 ``path::name``. ``-k`` selects cases as pytest does: words match as case-insensitive
 substrings of the case's name below the folder it was found in (that folder's own name, the
 path below it, ``::variant``; a file given by itself: its name), never of the folders above,
-so where a suite is checked out does not change what a word selects; combined with ``and``, ``or``, ``not`` and parentheses. With
-``failed_first`` the cases that failed last time (the cache file) run first. Results come back
+so where a suite is checked out does not change what a word selects; combined with ``and``,
+``or``, ``not`` and parentheses. With ``failed_first`` the cases that failed last time (the cache file) run first. Results come back
 in case order whatever order the workers finish in, so a suite's outputs depend only on the
 cases and the seed. Outputs: JUnit XML (:func:`junit_xml`), JSON (:func:`suite_json`), GitHub
 annotations (:func:`annotations`).
