@@ -177,7 +177,8 @@ def plan_scenario(
         for k in range(n - 1):  # other traffic, reacting to the recorded ego
             traffic = traffic_step(traffic, float(rec["t"][k + 1] - rec["t"][k]), lanes=world.lanes,
                                    parts=world.parts, limits=world.limits, lights=world.lights, stops=world.stops,
-                                   ego=EgoBox(rec["x"][k], rec["y"][k], rec["psi"][k], rec["v"][k], e.length),
+                                   ego=EgoBox(rec["x"][k], rec["y"][k], rec["psi"][k], rec["v"][k], e.length, e.width,
+                                              world.route.lanes),
                                    stop_speed=ws.stop_speed)
         if n > 1:
             acc = rec.get("a", rec.get("gamma", np.zeros(n)))

@@ -59,7 +59,6 @@ import numpy as np
 from twolevel.models.obb import box_corners, intersects, rect_axes
 from twolevel.models.params import VehicleParams
 from twolevel.models.rollout import Backend, rollout
-from twolevel.world.assumptions import kinds_of
 from twolevel.safety.failsafe import FailSafe, FailSafeSettings, brake_rate, manoeuvres, roll
 from twolevel.safety.network import Network, network_of
 from twolevel.safety.occupancy import Intervals, Occupancy, lane_of, predict
@@ -168,7 +167,7 @@ def ego_params(world: World) -> VehicleParams:
 def context(world: World, params: VehicleParams | None = None, settings: VerifySettings | None = None) -> Context:
     """The verification context of a world (builds its network once)."""
     p = params or ego_params(world)
-    return Context(world, network_of(world), p, np.asarray(kinds_of(world.parts.ids, world.assumptions), dtype=int),
+    return Context(world, network_of(world), p, world.parts.user,
                    settings or VerifySettings(), brake_rate(p))
 
 

@@ -650,7 +650,8 @@ class ClosedLoop:
         p0 = time.perf_counter()
         x_next = rollout(x, applied.control[None, None, :], s.dt, self.params).states[0, 1]
         traffic = tr.step(sensed.traffic, s.dt, lanes=w.lanes, parts=w.parts, limits=w.limits, lights=w.lights,
-                          stops=w.stops, ego=tr.EgoBox(X, Y, psi, v, w.ego.length), stop_speed=s.stop_speed)
+                          stops=w.stops, ego=tr.EgoBox(X, Y, psi, v, w.ego.length, w.ego.width, w.route.lanes),
+                          stop_speed=s.stop_speed)
         plant_ms = (time.perf_counter() - p0) * 1e3
         return LoopState(x_next, traffic, sensed.memory_after, sensed.s0, applied.accel,
                          float(applied.control[0])), plant_ms

@@ -49,8 +49,10 @@ this distance never hits the ego; the verifier leaves followers to it (see
 :mod:`twolevel.safety.verify`), and the responsibility classification counts a rear-end
 collision as not the ego's fault once the ego has been ahead in the lane for ρ_other.
 
-Which participant is which road user: ``assumptions.road_users`` maps participant ids and
-population ids to ``vehicle``, ``cyclist`` or ``pedestrian``; everyone else is a vehicle.
+Which participant is which road user: its ``kind`` in the scenario (:func:`user_of`: a
+``bicycle`` is a cyclist, a ``pedestrian`` a pedestrian, every other kind — ``parked`` too — a
+vehicle); where ``assumptions.road_users`` maps a participant or population id to ``vehicle``,
+``cyclist`` or ``pedestrian``, that wins.
 
 They belong to the world: a scenario declares them (its ``assumptions:`` section, read by
 :func:`from_spec` into :attr:`twolevel.world.world.World.assumptions`), and the safety layer
@@ -67,7 +69,7 @@ from typing import Any, Mapping, Sequence
 __all__ = [
     "VEHICLE", "CYCLIST", "PEDESTRIAN", "KIND_NAMES", "MotionBounds", "ResponseBounds", "Assumptions",
     "VEHICLE_BOUNDS", "CYCLIST_BOUNDS", "PEDESTRIAN_BOUNDS", "RSS_BOUNDS", "safe_distance", "safe_speed",
-    "stopping_speed", "kinds_of", "from_spec", "tighter_than_default",
+    "stopping_speed", "kinds_of", "user_of", "from_spec", "tighter_than_default",
 ]
 
 VEHICLE, CYCLIST, PEDESTRIAN = 0, 1, 2
@@ -163,16 +165,17 @@ def stopping_speed(distance: float, r: ResponseBounds = RSS_BOUNDS) -> float:
     return safe_speed(distance, 0.0, r)
 
 
-def kinds_of(ids: Sequence[str], a: Assumptions) -> list[int]:
+def kinds_of(ids: Sequence[str], a: Assumptions, default: Sequence[int] | None = None) -> list[int]:
     """The kind of road user of each participant id: named directly in ``road_users``, or a
-    member ``<population>-<n>`` of a named population; a vehicle otherwise."""
+    member ``<population>-<n>`` of a named population; else its ``default`` (the kind its
+    scenario gives it), or a vehicle."""
     table = dict(a.road_users)
     out = []
-    for pid in ids:
+    for k, pid in enumerate(ids):
         kind = table.get(pid)
         if kind is None and "-" in pid:
             kind = table.get(pid.rsplit("-", 1)[0])
-        out.append(VEHICLE if kind is None else kind)
+        out.append(kind if kind is not None else (VEHICLE if default is None else default[k]))
     return out
 
 
@@ -188,6 +191,12 @@ def _merge(base: MotionBounds, over: Any) -> MotionBounds:
 
 _USER_OF_PARTICIPANT = {"bicycle": "cyclist", "pedestrian": "pedestrian"}
 """A participant's ``kind`` → its kind of road user (others: vehicle)."""
+
+
+def user_of(kind: str) -> int:
+    """The road user (:data:`VEHICLE`, :data:`CYCLIST`, :data:`PEDESTRIAN`) a participant of this
+    ``kind`` is predicted as."""
+    return _KIND_INDEX[_USER_OF_PARTICIPANT.get(kind, "vehicle")]
 
 
 def from_spec(spec: Any, kinds: Mapping[str, str] | None = None) -> Assumptions:

@@ -627,6 +627,11 @@ class Route(Polyline):
     width: np.ndarray = field(default_factory=lambda: np.zeros(0))
     pieces: tuple[tuple[int, float, float, float], ...] = ()
 
+    @property
+    def lanes(self) -> tuple[int, ...]:
+        """The indices of the lanes the route runs along, in order."""
+        return tuple(p[0] for p in self.pieces)
+
     def limit_at(self, s: np.ndarray | float) -> np.ndarray:
         """Speed limit [m/s] in force at route position ``s`` [m]."""
         j = np.clip(np.searchsorted(self.limit_s, np.asarray(s, dtype=float), side="right") - 1, 0, len(self.limit_s) - 1)

@@ -28,7 +28,8 @@ __all__ = [
     "Arc", "Segment", "StartPose", "LaneSpec", "Road", "FreeLane", "MarkingSpec", "ZoneSpec", "ArmSpec",
     "ConnectionSpec", "SignalSpec", "JunctionSpec", "LaneKind", "LaneCategory", "MarkingKind", "ParticipantKind", "Point", "MAX_LANE_POINTS", "MIN_WIDTH", "SpeedLimitSign", "StopSign", "LightCycle",
     "LightStep", "TrafficLight", "MapFile", "LanePos", "Placement", "Box", "Ego", "RouteSpec",
-    "IDMParams", "Waypoint", "Participant", "Population", "RuleRef", "ControllerSettings",
+    "IDMParams", "Waypoint", "MobilParams", "Manoeuvre", "Walk", "Participant", "Population",
+    "MANOEUVRE_ACTIONS", "TRIGGER_KEYS", "RuleRef", "ControllerSettings",
     "RunSettings", "WeightsSpec", "ScenarioFile", "KMH", "Number", "Count", "COORD_MAX", "DEFAULT_SENSOR_RANGE",
     "TIME_MAX", "CONST_MAX", "SEED_MAX", "S_MAX", "MIN_PIECE", "MIN_SPACING", "MAX_ROUTE_POINTS",
     "UserBoundsSpec", "PedestrianBoundsSpec", "ResponseSpec", "AssumptionsSpec",
@@ -440,36 +441,172 @@ class Waypoint(_Model):
 
 
 Behaviour = Literal["stationary", "constant_velocity", "idm", "scripted"]
-ParticipantKind = Literal["car", "truck", "bus", "motorcycle", "bicycle", "pedestrian", "other"]
+ParticipantKind = Literal["car", "truck", "bus", "motorcycle", "bicycle", "pedestrian", "parked", "other"]
 """What a participant is: bicycles are cyclists and pedestrians pedestrians to the safety layer's
-assumptions (unless ``assumptions.road_users`` says otherwise), the rest vehicles."""
+assumptions (unless ``assumptions.road_users`` says otherwise), the rest vehicles; the kind also
+sets the default behaviour, box and IDM parameters (:mod:`twolevel.world.participants`)."""
+MANOEUVRE_ACTIONS = ("lane_change", "brake_to", "accelerate_to", "speed_profile", "follow_lane", "stop")
+"""The manoeuvre primitives (one per ``manoeuvres:`` item)."""
+TRIGGER_KEYS = ("at", "after", "after_start", "ego_within", "ego_headway")
+"""What starts a manoeuvre or a walk (at most one per item; default: ``after: 0``)."""
+_PARAMETERS = {"duration": ("lane_change",), "decel": ("brake_to", "accelerate_to", "follow_lane", "stop"),
+               "accel": ("brake_to", "accelerate_to", "follow_lane"), "along": ("speed_profile",),
+               "hold": ("follow_lane", "stop")}
+
+
+class MobilParams(_Model):
+    """MOBIL lane changes (Kesting, Treiber, Helbing 2007; their values are the defaults)."""
+
+    politeness: Number = Field(default=0.5, ge=0, le=1, description="weight of the others' loss against one's gain [-]")
+    threshold: Number = Field(default=0.1, ge=0, le=5, description="least net gain worth a change Δa_th [m/s²]")
+    b_safe: Number = Field(default=4.0, gt=0, le=10, description="hardest braking a change may impose on the new follower [m/s²]")
+    bias_right: Number = Field(default=0.3, ge=-2, le=2, description="keep-right bias Δa_bias [m/s²] (negative: keep left; 0: symmetric)")
+    duration: Number = Field(default=4.0, ge=1, le=20, description="how long a lane change takes [s]")
+
+
+def _triggers(item: BaseModel) -> list[str]:
+    return [k for k in TRIGGER_KEYS if getattr(item, k, None) is not None]
+
+
+class Manoeuvre(_Model):
+    """One primitive of a scripted participant's chain: exactly one action with its parameters,
+    started by at most one trigger (default: as soon as the previous one has ended). Speeds and
+    lane changes follow the participant's lane; what it asks beyond the assumptions about its
+    kind (twolevel/world/assumptions.py) is limited to them."""
+
+    lane_change: str | None = Field(default=None, min_length=1, description="'left', 'right', or the id of the lane beside")
+    brake_to: Speed | None = Field(default=None, description="slow down to this speed [m/s] at 'decel'")
+    accelerate_to: Speed | None = Field(default=None, description="speed up to this speed [m/s] at 'accel'")
+    speed_profile: list[tuple[Annotated[Number, Field(ge=0, le=TIME_MAX)], Speed]] | None = Field(
+        default=None, min_length=1, max_length=1000,
+        description="[[t or s, v], …]: speed [m/s] over time [s] or distance [m] since it started, linear in between")
+    follow_lane: Speed | None = Field(default=None, description="keep the lane at this speed [m/s]")
+    stop: Literal[True] | None = Field(default=None, description="true: brake to a standstill at 'decel' and stand")
+    duration: Number | None = Field(default=None, ge=0.5, le=30, description="lane_change: how long it takes [s]; default 4")
+    decel: Number | None = Field(default=None, gt=0, le=30, description="deceleration [m/s²]; default 3")
+    accel: Number | None = Field(default=None, gt=0, le=30, description="acceleration [m/s²]; default 1.5")
+    along: Literal["time", "distance"] = Field(default="time", description="speed_profile: its first column is time [s] or distance [m]")
+    hold: Number | None = Field(default=None, ge=0, le=TIME_MAX, description="follow_lane / stop: lasts at least this long [s]")
+    at: Number | None = Field(default=None, ge=0, le=TIME_MAX, description="start at this time [s]")
+    after: Number | None = Field(default=None, ge=0, le=TIME_MAX, description="start this long after the previous one ended [s]")
+    after_start: Number | None = Field(default=None, ge=0, le=TIME_MAX, description="start this long after the previous one started [s]")
+    ego_within: Number | None = Field(default=None, gt=0, le=1000, description="start when the ego comes within this distance [m]")
+    ego_headway: Number | None = Field(default=None, gt=0, le=60, description="start when the ego's distance / its speed drops below this [s]")
+
+    @property
+    def action(self) -> str:
+        """The action's key."""
+        return next(k for k in MANOEUVRE_ACTIONS if getattr(self, k) is not None)
+
+    @model_validator(mode="after")
+    def _one_action(self) -> "Manoeuvre":
+        given = [k for k in MANOEUVRE_ACTIONS if getattr(self, k) is not None]
+        if len(given) != 1:
+            raise ValueError(f"a manoeuvre is exactly one of {', '.join(MANOEUVRE_ACTIONS)} (got "
+                             f"{', '.join(given) or 'none'})")
+        if len(_triggers(self)) > 1:
+            raise ValueError(f"a manoeuvre has at most one trigger of {', '.join(TRIGGER_KEYS)}")
+        for name, actions in _PARAMETERS.items():
+            if name in self.model_fields_set and given[0] not in actions:
+                raise ValueError(f"'{name}' belongs to {' / '.join(actions)}, not to {given[0]}")
+        xs = [x for x, _ in self.speed_profile or []]
+        if any(b <= a for a, b in zip(xs, xs[1:])):
+            raise ValueError("a speed profile's times or distances must increase strictly")
+        return self
+
+
+class Walk(_Model):
+    """A pedestrian's walk: across the road at a point of a lane (``lane``, ``s``: from the kerb
+    on ``side`` to the other side of the road), or straight on from its ``start`` pose for
+    ``distance``; it waits at the kerb for a ``gap`` in the traffic unless that is 0."""
+
+    lane: str | None = Field(default=None, description="lane whose road it crosses")
+    s: Along | None = Field(default=None, description="where along that lane it crosses [m]")
+    side: Literal["right", "left"] = Field(default="right", description="the kerb it starts from, seen in the lane's direction")
+    distance: Number | None = Field(default=None, gt=0, le=1000, description="walk straight on from 'start' this far [m]")
+    speed: Number = Field(default=1.4, gt=0, le=15, description="walking speed [m/s]")
+    gap: Number = Field(default=2.0, ge=0, le=60, description="margin [s] it keeps between walking past a lane and the next vehicle there; 0: steps out without looking")
+    crosswalk: bool = Field(default=False, description="a marked crossing: vehicles stop for a pedestrian waiting at it")
+    at: Number | None = Field(default=None, ge=0, le=TIME_MAX, description="sets off (to the kerb, then across) at this time [s]")
+    ego_within: Number | None = Field(default=None, gt=0, le=1000, description="sets off when the ego comes within this distance [m]")
+    ego_headway: Number | None = Field(default=None, gt=0, le=60, description="sets off when the ego's distance / its speed drops below this [s]")
+
+    @model_validator(mode="after")
+    def _one_path(self) -> "Walk":
+        crossing = self.lane is not None or self.s is not None
+        if crossing == (self.distance is not None) or (crossing and (self.lane is None or self.s is None)):
+            raise ValueError("a walk is either across the road at 'lane' and 's' [m], or 'distance' [m] straight on from 'start'")
+        if len(_triggers(self)) > 1:
+            raise ValueError("a walk has at most one trigger of at, ego_within, ego_headway")
+        return self
 
 
 class Participant(_Model):
-    """Another traffic participant."""
+    """Another traffic participant: a vehicle, cyclist, pedestrian or parked car."""
 
     id: str = Field(min_length=1, description="participant id")
-    behaviour: Behaviour = Field(description="stationary, constant_velocity, idm or scripted")
-    kind: ParticipantKind = Field(default="car", description="car, truck, bus, motorcycle, bicycle, pedestrian or other")
-    start: Placement | None = Field(default=None, description="initial pose (not for scripted)")
+    kind: ParticipantKind = Field(default="car", description="car, truck, bus, motorcycle, bicycle, pedestrian, parked or other")
+    behaviour: Behaviour | None = Field(
+        default=None, description="stationary, constant_velocity, idm or scripted; default by kind: idm (vehicles, bicycles), "
+                                  "stationary (parked), a walk (pedestrian), scripted with 'manoeuvres'")
+    start: Placement | None = Field(default=None, description="initial pose (not for waypoints or a walk across a lane)")
     speed: Number = Field(default=0.0, ge=0, le=100, description="initial speed [m/s]")
-    box: Box = Field(default_factory=Box, description="bounding box [m]")
-    idm: IDMParams = Field(default_factory=IDMParams, description="IDM parameters (behaviour idm)")
+    box: Box = Field(default_factory=Box, description="bounding box [m]; default by kind (cyclist 1.8 × 0.65, pedestrian 0.5 × 0.6)")
+    idm: IDMParams = Field(default_factory=IDMParams, description="IDM parameters (behaviour idm); a cyclist's default v0 5 m/s, T 1 s, s0 1.5 m, a 1, b 1.5")
+    mobil: MobilParams | None = Field(default=None, description="MOBIL lane changes (behaviour idm): true, or {politeness, threshold, b_safe, bias_right, duration}")
+    critical_gap: Number = Field(default=6.5, ge=0, le=30, description="time gap [s] accepted in priority traffic after a stop sign")
     waypoints: list[Waypoint] | None = Field(default=None, min_length=2, description="[{t [s], x [m], y [m]}] (scripted)")
+    manoeuvres: list[Manoeuvre] | None = Field(default=None, min_length=1, max_length=100, description="primitives in order (scripted along its lane)")
+    walk: Walk | None = Field(default=None, description="a pedestrian's walk {lane, s, side | distance; speed, gap, crosswalk, trigger}")
+
+    @field_validator("mobil", mode="before")
+    @classmethod
+    def _mobil_switch(cls, value: Any) -> Any:
+        return _switch(value)
+
+    @property
+    def behaviour_of(self) -> str:
+        """The behaviour, with the kind's default filled in ('walk' for a pedestrian's walk)."""
+        if self.behaviour is not None:
+            return self.behaviour
+        if self.walk is not None:
+            return "walk"
+        if self.manoeuvres is not None:
+            return "scripted"
+        return "stationary" if self.kind in ("parked", "pedestrian") else "idm"
 
     @model_validator(mode="after")
     def _fits_behaviour(self) -> "Participant":
-        if self.behaviour == "scripted":
-            if self.waypoints is None:
-                raise ValueError("a scripted participant needs 'waypoints: [{t, x, y}, …]'")
-            ts = [w.t for w in self.waypoints]
-            if any(b <= a for a, b in zip(ts, ts[1:])):
-                raise ValueError("waypoint times must increase strictly")
-        else:
-            if self.start is None:
-                raise ValueError(f"a {self.behaviour} participant needs 'start'")
-            if self.behaviour == "idm" and self.start.lane is None:
-                raise ValueError("an idm participant follows a lane: give 'start: {lane, s}'")
+        b = self.behaviour_of
+        if self.kind == "parked" and b != "stationary":
+            raise ValueError("a parked car is stationary: leave out 'behaviour' (or give 'stationary')")
+        if self.kind == "pedestrian" and b not in ("walk", "stationary", "scripted"):
+            raise ValueError("a pedestrian walks ('walk: {…}'), stands, or follows waypoints")
+        if self.walk is not None and (self.kind != "pedestrian" or self.behaviour is not None):
+            raise ValueError("'walk' is a pedestrian's (kind: pedestrian, no 'behaviour')")
+        if self.mobil is not None and b != "idm":
+            raise ValueError("'mobil' lane changes are for idm participants")
+        if b == "scripted":
+            if (self.waypoints is None) == (self.manoeuvres is None):
+                raise ValueError("a scripted participant needs either 'waypoints: [{t, x, y}, …]' or 'manoeuvres: [...]'")
+            if self.waypoints is not None:
+                ts = [w.t for w in self.waypoints]
+                if any(b2 <= a for a, b2 in zip(ts, ts[1:])):
+                    raise ValueError("waypoint times must increase strictly")
+            elif self.start is None or self.start.lane is None:
+                raise ValueError("a participant with manoeuvres follows a lane: give 'start: {lane, s}'")
+        elif self.waypoints is not None or self.manoeuvres is not None:
+            raise ValueError(f"'waypoints' and 'manoeuvres' are for scripted participants, not {b}")
+        if b == "walk":
+            assert self.walk is not None
+            if self.walk.distance is not None and (self.start is None or self.start.heading is None):
+                raise ValueError("a walk of a 'distance' starts from a free pose: give 'start: {x, y, heading}'")
+            if self.walk.lane is not None and self.start is not None:
+                raise ValueError("a walk across a lane starts at the kerb by itself: leave out 'start'")
+        elif b != "scripted" and self.start is None:
+            raise ValueError(f"a {b} participant needs 'start'")
+        if b == "idm" and (self.start is None or self.start.lane is None):
+            raise ValueError("an idm participant follows a lane: give 'start: {lane, s}'")
         return self
 
 
@@ -481,14 +618,24 @@ class Population(_Model):
     lanes: list[str] = Field(min_length=1, description="lanes to place them on")
     s_range: tuple[Along, Along] | None = Field(default=None, description="[from, to] along each lane [m]; default whole lane")
     speed_range: tuple[Speed, Speed] = Field(default=(20.0, 30.0), description="initial speeds drawn uniformly [m/s]")
+    kind: Literal["car", "truck", "bus", "motorcycle", "bicycle", "other"] = Field(default="car", description="car, truck, bus, motorcycle, bicycle or other (bicycles keep right, with a cyclist's IDM defaults)")
     behaviour: Literal["stationary", "constant_velocity", "idm"] = Field(default="idm", description="behaviour of all")
     min_gap: Number = Field(default=8.0, ge=0, le=500, description="minimum bumper-to-bumper gap when placing [m]")
     box: Box = Field(default_factory=Box, description="bounding box of each [m]")
     idm: IDMParams = Field(default_factory=IDMParams, description="IDM parameters")
+    mobil: MobilParams | None = Field(default=None, description="MOBIL lane changes: true, or {politeness, threshold, b_safe, bias_right, duration}")
+    critical_gap: Number = Field(default=6.5, ge=0, le=30, description="time gap [s] accepted in priority traffic after a stop sign")
     seed: Count | None = Field(default=None, ge=0, le=SEED_MAX, description="placement seed; default: the run's seed")
+
+    @field_validator("mobil", mode="before")
+    @classmethod
+    def _mobil_switch(cls, value: Any) -> Any:
+        return _switch(value)
 
     @model_validator(mode="after")
     def _ranges(self) -> "Population":
+        if self.mobil is not None and self.behaviour != "idm":
+            raise ValueError("'mobil' lane changes are for idm populations")
         for name in ("s_range", "speed_range"):
             r = getattr(self, name)
             if r is not None and (r[0] > r[1] or r[0] < 0):

@@ -1,14 +1,15 @@
 """The runtime world: a loaded :class:`~twolevel.world.loader.Scenario` turned into arrays.
 
 ``build_world(scenario)`` samples the map's lanes, builds the route (reference path, limits,
-desired speed), the tables of signs and lights, the participants (expanding populations with
-the seed) and their initial state. Everything here is frozen dataclasses and numpy arrays.
+desired speed), the tables of signs and lights (with the conflicts each stop line gives way to),
+the participants (:mod:`twolevel.world.participants`: kinds, populations expanded with the seed)
+and their initial state. Everything here is frozen dataclasses and numpy arrays.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from types import MappingProxyType
 from typing import Mapping
@@ -21,16 +22,13 @@ from twolevel.world.geometry import LaneSet, Route, concatenate, resample
 from twolevel.world.junction import Plan
 from twolevel.world.lanes import build_lanes
 from twolevel.world.loader import Scenario, _route_lanes, sensing_of, successors
-from twolevel.world.schema import ControllerSettings, IDMParams, LightCycle, MapFile, Placement, Population
+from twolevel.world.participants import participants_of, pose_of
+from twolevel.world.schema import ControllerSettings, LightCycle, MapFile
 from twolevel.world.speed_profile import Comfort, speed_profile
-from twolevel.world.traffic import (
-    CONSTANT_VELOCITY, GREEN, IDM, RED, SCRIPTED, STATIONARY, YELLOW, Lights, Participants, SpeedLimits,
-    StopLines, TrafficState,
-)
+from twolevel.world.traffic import GREEN, RED, YELLOW, Lights, Participants, SpeedLimits, StopLines, TrafficState
+from twolevel.world.traffic.junctions import conflicts_of
 
-__all__ = ["EgoStart", "Settings", "World", "build_world", "population_slots"]
-
-_KINDS = {"stationary": STATIONARY, "constant_velocity": CONSTANT_VELOCITY, "idm": IDM, "scripted": SCRIPTED}
+__all__ = ["EgoStart", "Settings", "World", "build_world"]
 _STATES = {"green": GREEN, "yellow": YELLOW, "red": RED}
 
 
@@ -223,38 +221,6 @@ def _route(scn: Scenario, lanes: LaneSet, index: dict[str, int], limits: SpeedLi
                  limit_s=limit_s, limit_v=limit_v, v_des=v_des, width=width, pieces=tuple(pieces))
 
 
-def _pose(p: Placement, lanes: LaneSet, index: dict[str, int]) -> tuple[float, float, float, int, float, float]:
-    """x, y [m], psi [rad], lane index (−1), s [m], lateral [m] of a placement."""
-    if p.lane is not None:
-        i = index[p.lane]
-        s = p.s or 0.0
-        xy, h = lanes.pose(np.array([i]), np.array([s]), np.array([p.lateral]))
-        return float(xy[0, 0]), float(xy[0, 1]), float(h[0]), i, s, p.lateral
-    return float(p.x or 0.0), float(p.y or 0.0), math.radians(p.heading or 0.0), -1, 0.0, 0.0
-
-
-def population_slots(pop: Population, lanes: LaneSet, index: dict[str, int], ego_lane: int, ego_s: float
-                     ) -> tuple[np.ndarray, np.ndarray]:
-    """Places a population may use: (lane index, s [m]) one box length + ``min_gap`` apart along
-    each of its lanes within ``s_range``, keeping that pitch clear of the ego."""
-    pitch = pop.box.length + pop.min_gap
-    ls, ss = [], []
-    for name in pop.lanes:
-        li = index[name]
-        lo, hi = pop.s_range or (0.0, float(lanes.length[li]))
-        hi = min(hi, float(lanes.length[li]))
-        slots = np.arange(lo + pop.box.length / 2, hi - pop.box.length / 2 + 1e-9, pitch)
-        if li == ego_lane:
-            slots = slots[np.abs(slots - ego_s) >= pitch]
-        ls.append(np.full(len(slots), li))
-        ss.append(slots)
-    return np.concatenate(ls).astype(int), np.concatenate(ss)
-
-
-def _idm_row(p: IDMParams) -> list[float]:
-    return [math.nan if p.v0 is None else p.v0, p.T, p.s0, p.a, p.b, p.delta]
-
-
 def build_world(scn: Scenario) -> World:
     """The runtime :class:`World` of a loaded scenario (deterministic for the run's seed)."""
     spec = scn.spec
@@ -264,47 +230,15 @@ def build_world(scn: Scenario) -> World:
     lights = _lights(m, index, plans)
     stops = _stops(m, index, plans)
     junctions = build_junctions(lanes, index, plans, stops.ids, lights.ids)
+    stops = replace(stops, must_stop=np.ones(len(stops.ids), dtype=bool), conflicts=conflicts_of(lanes, stops.lane, stops.s))
     c: ControllerSettings = spec.controller
     sense = sensing_of(spec)
     comfort = Comfort(c.comfort_accel, c.comfort_decel, c.comfort_jerk, c.comfort_lat_accel)
     route = _route(scn, lanes, index, limits, comfort, sense.v_bound)
 
-    rows: list[dict[str, object]] = []
-    for p in spec.participants:
-        x, y, psi, lane, s, lat = _pose(p.start, lanes, index) if p.start is not None else (0, 0, 0, -1, 0, 0)
-        wp = [(w.t, w.x, w.y) for w in p.waypoints or []]
-        if wp:
-            x, y = wp[0][1], wp[0][2]
-            psi = math.atan2(wp[1][2] - wp[0][2], wp[1][1] - wp[0][1])
-        rows.append(dict(id=p.id, kind=_KINDS[p.behaviour], x=x, y=y, psi=psi, v=p.speed, lane=lane, s=s, lat=lat,
-                         L=p.box.length, W=p.box.width, idm=_idm_row(p.idm), wp=wp))
-    ex, ey, epsi, elane, es, _ = _pose(spec.ego.start, lanes, index)
-    for pop in spec.populations:
-        rng = np.random.default_rng(spec.run.seed if pop.seed is None else pop.seed)
-        slot_lane, slot_s = population_slots(pop, lanes, index, elane, es)
-        take = np.sort(rng.choice(len(slot_s), size=min(pop.count, len(slot_s)), replace=False))
-        li, sv = slot_lane[take], slot_s[take]
-        speeds = rng.uniform(*pop.speed_range, size=len(sv))
-        xy, h = lanes.pose(li, sv)
-        for j in range(len(sv)):
-            rows.append(dict(id=f"{pop.id}-{j}", kind=_KINDS[pop.behaviour], x=xy[j, 0], y=xy[j, 1], psi=h[j],
-                             v=0.0 if pop.behaviour == "stationary" else speeds[j], lane=li[j], s=sv[j], lat=0.0,
-                             L=pop.box.length, W=pop.box.width, idm=_idm_row(pop.idm), wp=[]))
-    n = len(rows)
-    wmax = max([len(r["wp"]) for r in rows] + [2])  # type: ignore[arg-type]
-    st = np.zeros((n, wmax))
-    sxy = np.zeros((n, wmax, 2))
-    for i, r in enumerate(rows):
-        wp = r["wp"] or [(0.0, r["x"], r["y"]), (1.0, r["x"], r["y"])]  # type: ignore[list-item]
-        arr = np.asarray(wp, dtype=float)
-        st[i, : len(arr)], sxy[i, : len(arr)] = arr[:, 0], arr[:, 1:]
-        st[i, len(arr):] = arr[-1, 0] + np.arange(1, wmax - len(arr) + 1)
-        sxy[i, len(arr):] = arr[-1, 1:]
-    col = lambda name, dtype=float: np.array([r[name] for r in rows], dtype=dtype).reshape(n)  # noqa: E731
-    parts = Participants(tuple(str(r["id"]) for r in rows), col("kind", int), col("L"), col("W"),
-                         np.array([r["idm"] for r in rows], dtype=float).reshape(n, 6), st, sxy)
-    traffic0 = TrafficState(0.0, col("x"), col("y"), col("psi"), col("v"), col("lane", int), col("s"), col("lat"),
-                            np.ones(n, dtype=bool), np.zeros(n), np.full(n, -1, dtype=int))
+    assumptions = from_spec(spec.assumptions, {p.id: p.kind for p in spec.participants})
+    ex, ey, epsi, elane, es, _ = pose_of(spec.ego.start, lanes, index)
+    parts, traffic0 = participants_of(spec, lanes, index, assumptions, elane, es)
     settings = Settings(c.H, c.dt, c.r_near, c.r, c.D_safe, c.samples, c.time_limit, c.solver, c.stop_speed,
                         c.yellow_decel, spec.run.duration, spec.run.seed, c.horizon_s, c.coarse_dt,
                         None if c.coarse_steps is None else tuple(c.coarse_steps), c.rss, sense.range, sense.response,
@@ -316,7 +250,7 @@ def build_world(scn: Scenario) -> World:
     on_s, on_l = np.flatnonzero(~np.isnan(rs)), np.flatnonzero(~np.isnan(rl))
     return World(spec.name or scn.path, lanes, route, limits, lights, stops, parts, traffic0, ego, settings,
                  tuple((r.path, r.constants) for r in scn.rules), rs[on_s], on_s, rl[on_l], on_l,
-                 from_spec(spec.assumptions, {p.id: p.kind for p in spec.participants}), junctions)
+                 assumptions, junctions)
 
 
 def load_rulesets(world: World) -> tuple[list, list]:
