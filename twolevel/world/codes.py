@@ -40,6 +40,9 @@ YML426 = Code("YML426", "parameter-range-invalid", W, "Some value within a param
 YML427 = Code("YML427", "goal-out-of-reach", W, "The goal cannot be reached within the run (or its deadline) at the speed limits.")
 YML428 = Code("YML428", "duplicate-rule", E,
               "Two rules of a scenario share a name: two rule files define it, or one file is listed twice.")
+YML440 = Code("YML440", "impossible-motion", E, "A scripted participant asks for more acceleration or braking than any tyre gives.")
+YML441 = Code("YML441", "beyond-assumptions", W,
+              "A participant is scripted beyond what the safety layer assumes of its kind; the simulation limits it.")
 
 YML430 = Code("YML430", "look-ahead-invalid", E,
               "The MPC's look-ahead (horizon_s, coarse_dt, coarse_steps) is not whole periods or contradicts itself.")

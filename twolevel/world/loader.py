@@ -30,6 +30,7 @@ from twolevel.world.junction import plan_junctions
 from twolevel.world.layout import check_layout, lane_lengths
 from twolevel.world.parameters import check_variants, explain, substitute
 from twolevel.world.schema import DEFAULT_SENSOR_RANGE, MAX_ROUTE_POINTS, MapFile, ParameterDeclarations, ScenarioFile
+from twolevel.world.scripts import check_scripts
 
 if typing.TYPE_CHECKING:
     from twolevel.world.assumptions import ResponseBounds
@@ -502,6 +503,7 @@ def _check_scenario(spec: ScenarioFile, doc: Document, m: MapFile) -> list[Diagn
                           f"{spec.controller.dt:g} s): it would take no step", doc.locate(("run", "duration"), value=True),
                           hint="a run lasts at least dt"))
     out += _check_assumptions(spec, doc, [i for i, _ in ids[1:]])
+    out += check_scripts(spec, doc, m)
     out += _check_controller(spec, doc, m, succ)
     return out
 
