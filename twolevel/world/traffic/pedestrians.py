@@ -129,13 +129,11 @@ def walk(walks: Walks, mem: Memory, who: np.ndarray, t: float, dt: float, v: np.
     phase = np.where(start, 1, phase)
     phase = np.where((phase == 1) & clear, 2, phase)
     left = np.maximum(walks.length[who] - odo, 0.0)
-    goal = np.where(phase == 2, np.minimum(walks.speed[who], np.sqrt(2 * a_max * left)), 0.0)
+    goal = np.where(phase == 2, np.minimum(walks.speed[who], np.sqrt(2 * a_max * left)), 0.0)  # 0: standing or across
     acc = np.clip((goal - v) / dt, -a_max, a_max)
     v_new = np.maximum(v + acc * dt, 0.0)
     odo = np.minimum(odo + 0.5 * (v + v_new) * dt, walks.length[who])
-    arrived = (phase == 2) & (walks.length[who] - odo < 1e-3)
-    v_new = np.where(arrived, 0.0, v_new)
-    phase = np.where(arrived, 3, phase)
+    phase = np.where((phase == 2) & (walks.length[who] - odo < 1e-3), 3, phase)  # then it slows to a stop there
     h = walks.heading[who]
     pos = walks.origin[who] + odo[:, None] * np.stack([np.cos(h), np.sin(h)], axis=1)
     return pos, v_new, acc, np.stack([phase, odo]).T
