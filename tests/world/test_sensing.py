@@ -7,15 +7,18 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from twolevel.world.loader import load_scenario
 from twolevel.world.provided import PROVIDED_SIGNALS, SIGNALS
 from twolevel.world.sensing import Memory, others_predicted, sense
-from twolevel.world.signals import TrafficLog, participant_signals_along, signals_along
+from twolevel.world.signals import TrafficLog, horizon_constants, participant_signals_along, signals_along
 from twolevel.world.traffic import TrafficState
 from twolevel.world.world import build_world
+
+from helpers.traffic_worlds import CROSSING, world
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -153,3 +156,38 @@ def test_batched_participant_signals_equal_the_reference() -> None:
     assert (got["in_same_lane[car3]"] < 0).all() and (got["in_same_lane[car1]"] > 0).any()
     assert (got["d_lon[car2]"] < 0).all() and (got["present[car2]"] == np.inf).any()
     assert (got["present[car4]"] == -np.inf).all() and (got["d_lon[car4]"] == np.inf).all()
+
+
+@pytest.mark.parametrize("psi,leads", [
+    (np.pi / 2, False),  # crossing at right angles (cos 90° = 6e−17 counted as "ahead" before the fix)
+    (np.pi / 2 - 0.3, False),  # turning across
+    (0.3, True),  # changing lanes in front: still the car ahead
+    (0.0, True),
+])
+def test_regression_a_vehicle_crossing_at_right_angles_is_no_car_ahead(tmp_path: Path, psi: float,
+                                                                       leads: bool) -> None:
+    """A vehicle in the middle of the ego's lane 15 m ahead, heading ``psi`` against the ego's
+    heading 0: d_lead (monitors, batched sensing, the MPC's horizon constants) counts it only
+    when it travels the ego's way (within LEAD_HEADING)."""
+    w = world(tmp_path, CROSSING, "participants: [{id: car, behaviour: stationary, start: {lane: n, s: 10}}]\n"
+              "controller: {r_near: 40}\n", ego_lane="e", goal=290)
+    ego_x, car_x, y = 120.0, 135.0, -1.75
+    traffic = TrafficState(0.0, np.array([car_x]), np.array([y]), np.array([psi]), np.array([5.0]), np.array([-1]),
+                           np.zeros(1), np.zeros(1), np.ones(1, bool), np.zeros(1), np.full(1, -1))
+    gap = car_x - ego_x - 4.22
+    log = TrafficLog(traffic.x[None], traffic.y[None], traffic.psi[None], traffic.v[None], np.ones((1, 1), bool),
+                     w.parts.length, w.parts.width)
+    ego = {"x": np.array([ego_x]), "y": np.array([y]), "psi": np.zeros(1), "v": np.array([10.0])}
+    ref = signals_along(w, log, ego)
+    s0 = float(ref["s"][0])
+    others = others_predicted(w, traffic, ego_x, y, s0, 3, 0.1)
+    got = sense(w, 0.0, 0.1, Memory.fresh(w), others, np.full((1, 4), ego_x), np.full((1, 4), y), np.zeros((1, 4)),
+                np.full((1, 4), 10.0), np.zeros((1, 4)), np.zeros((1, 4)))
+    hc = horizon_constants(w, traffic, 0.0, (ego_x, y, 0.0, 10.0))
+    if leads:
+        assert ref["d_lead"][0] == pytest.approx(gap) and got["d_lead"][0, 0] == pytest.approx(gap)
+        assert hc.lead == 0
+    else:
+        assert np.isinf(ref["d_lead"][0]) and np.isinf(got["d_lead"][0, 0]) and hc.lead == -1
+        assert ref["v_lead"][0] == 10.0
+    assert 0 < ref["min_gap"][0] <= car_x - ego_x - 2.11  # seen all the same: no_collision and min_gap keep it

@@ -43,6 +43,7 @@ import numpy as np
 from twolevel.models.obb import box_corners, box_separation
 from twolevel.safety.occupancy import Intervals, Occupancy, predict
 from twolevel.safety.verify import Context
+from twolevel.world.signals import same_way
 from twolevel.world.traffic import TrafficState
 
 __all__ = ["EGO_AT_FAULT", "EGO_STANDING", "HIT_FROM_BEHIND", "CUT_IN", "OTHER_BROKE_ASSUMPTIONS", "Responsibility",
@@ -53,7 +54,6 @@ EGO_STANDING = "ego_standing"
 HIT_FROM_BEHIND = "hit_from_behind"
 CUT_IN = "cut_in"
 OTHER_BROKE_ASSUMPTIONS = "other_broke_assumptions"
-_ALIGNED = math.cos(math.radians(45.0))
 
 
 @dataclass(frozen=True)
@@ -124,7 +124,7 @@ def _from_behind(t: np.ndarray, ego: np.ndarray, other: np.ndarray, ego_box: tup
     along = dx * math.cos(psi) + dy * math.sin(psi)
     across = -dx * math.sin(psi) + dy * math.cos(psi)
     behind = along < 0 and abs(across) < 0.5 * (ego_box[1] + other_box[1])
-    aligned = math.cos(other[c, 2] - psi) >= _ALIGNED
+    aligned = bool(same_way(other[c, 2], psi))
     if not (behind and aligned):
         return False
     if ego_lane is None or other_lane is None:

@@ -14,7 +14,7 @@ v_max         m/s    speed limit in force at the ego's route position
 d_stop        m      route distance to the next stop line that applies (+inf if none within r_near)
 light_red     1/0    1 when the next light within r_near is red, or yellow and the ego can stop
 d_light       m      route distance to that light's stop line (+inf if none within r_near)
-d_lead        m      bumper-to-bumper gap to the nearest vehicle ahead in the ego's lane (+inf if none)
+d_lead        m      bumper-to-bumper gap to the nearest vehicle ahead in the ego's lane heading its way (+inf if none)
 v_lead        m/s    that vehicle's speed along the route (= v if none)
 min_gap       m      oriented-box separation to the nearest vehicle within r_near (+inf if none)
 n_near        -      number of vehicles within r_near

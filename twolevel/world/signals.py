@@ -26,8 +26,10 @@ Definitions (sensing is limited to ``r_near``):
   (d_light ≥ v²/(2·yellow_decel)); otherwise 0. (Not "yellow and cannot stop", which reads
   inverted: a driver who can stop at yellow must; one who cannot proceeds.)
 * ``d_lead``/``v_lead``: among vehicles within r_near whose route projection is ahead (s_i > s),
-  in the ego's lane (|e_i − e| < lane width / 2) and heading the same way, the nearest: bumper-to-
-  bumper gap s_i − s − (L_ego + L_i)/2 and its speed along the route. +inf / v if none.
+  in the ego's lane (|e_i − e| < lane width / 2) and heading the same way (within
+  :data:`LEAD_HEADING` of the route's heading there: a vehicle crossing at right angles, or
+  turning across, is no car ahead), the nearest: bumper-to-bumper gap s_i − s − (L_ego + L_i)/2
+  and its speed along the route. +inf / v if none.
 * ``min_gap``: signed oriented-box separation to the nearest vehicle within r_near (+inf if none).
 * ``rss_gap``: the vehicle ahead as for ``d_lead`` but within the sensing range
   (``settings.sensor_range`` ≥ r_near, what the ego must be able to stop for), its bumper-to-bumper
@@ -55,12 +57,22 @@ from twolevel.world.relations import acceleration, relations
 from twolevel.world.traffic import RED, YELLOW, TrafficState
 from twolevel.world.world import World
 
-__all__ = ["PASS_MARGIN", "STOP_ZONE", "TrafficLog", "StopMemory", "HorizonConstants", "signals_along",
-           "participant_signals_along", "horizon_constants", "update_stop_memory", "ahead_in_lane", "rss_gap",
+__all__ = ["PASS_MARGIN", "STOP_ZONE", "LEAD_HEADING", "TrafficLog", "StopMemory", "HorizonConstants", "signals_along",
+           "participant_signals_along", "horizon_constants", "update_stop_memory", "same_way", "ahead_in_lane", "rss_gap",
            "sensing_window"]
 
 PASS_MARGIN = 5.0  # [m] how far past a stop line it still counts (so running it is visible)
 STOP_ZONE = 3.0  # [m] a stop counts for a stop sign when made at most this far before its line
+LEAD_HEADING = np.pi / 4
+"""[rad] Largest heading difference from the route at which another vehicle still travels the same
+way (a leader, a follower): a lane change or a bend is well within it, a crossing is not."""
+
+
+def same_way(psi: np.ndarray | float, heading: np.ndarray | float) -> np.ndarray:
+    """Whether vehicles heading ``psi`` [rad] travel the way ``heading`` [rad] points: the
+    difference within :data:`LEAD_HEADING` (cos 90° is 6e−17, not 0: a sign test lets a crossing
+    vehicle through)."""
+    return np.cos(np.asarray(psi) - np.asarray(heading)) >= np.cos(LEAD_HEADING)
 
 
 @dataclass(frozen=True, eq=False)
@@ -156,10 +168,10 @@ def ahead_in_lane(route: Route, s_i: np.ndarray, e_i: np.ndarray, psi_i: np.ndar
                   e: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
     """Which vehicles at route coordinates ``s_i``, ``e_i`` [m] with heading ``psi_i`` [rad] are
     *ahead in the ego's lane* for an ego at ``s``, ``e`` [m] (broadcast): projected ahead, within
-    half a lane width of the ego's lateral offset, heading the route's way; and the cosine of
-    their heading to the route's (their speed's share along it)."""
-    along = np.cos(psi_i - route.heading_at(s_i))
-    return (s_i > s) & (np.abs(e_i - e) < route.width_at(s_i) / 2) & (along > 0), along
+    half a lane width of the ego's lateral offset, heading the route's way (:func:`same_way`); and
+    the cosine of their heading to the route's (their speed's share along it)."""
+    h = route.heading_at(s_i)
+    return (s_i > s) & (np.abs(e_i - e) < route.width_at(s_i) / 2) & same_way(psi_i, h), np.cos(psi_i - h)
 
 
 def rss_gap(gap: np.ndarray, v: np.ndarray, v_front: np.ndarray, response: ResponseBounds) -> np.ndarray:
