@@ -134,6 +134,18 @@ def test_the_ego_leads_on_the_lane_its_body_reaches_into(tmp_path: Path) -> None
     assert gap.min() > 0.5 and states[-1].v[0] < 0.05
 
 
+def test_regression_the_ego_at_an_angle_across_the_lane_line_is_in_the_way(tmp_path: Path) -> None:
+    """The ego stands turned 0.29 rad towards lane r with its centre 0.44 m inside lane l (a merge
+    the safety layer stopped half-way): its centre and half width alone leave 2.19 − 0.9 = 1.29 m
+    beside it, enough for a car on lane r to pass, but its turned box reaches 0.73 m into lane r.
+    The car on lane r used to drive into it; it stops behind it."""
+    w = world(tmp_path, TWO_LANES, "participants:\n  - {id: car, start: {lane: r, s: 200}, speed: 15}\n")
+    states = run(w, 40.0, ego=EgoBox(300.0, 2.19, -0.289, 0.0))
+    rear = 300.0 - (2.11 * np.cos(0.289) + 0.9 * np.sin(0.289))  # the turned box's rearmost point
+    front = np.array([st.s[0] + 2.11 for st in states])
+    assert front.max() < rear and states[-1].v[0] < 0.05
+
+
 @pytest.mark.parametrize("route,psi,behind,yields", [
     (True, 0.0, 75.0, True),     # its route continues on lane l: it has to get over (indicator on)
     (False, 0.06, 75.0, True),   # drifting towards lane l at 0.9 m/s
@@ -151,6 +163,35 @@ def test_vehicles_behind_open_a_gap_for_a_merging_ego(tmp_path: Path, route: boo
         assert a.max() < 0 and a.min() >= -0.5 * 4.0 - 1e-9  # brakes, within politeness · b_safe
     else:
         assert a.min() > 0  # keeps its own pace
+
+
+MERGE = (Path(__file__).resolve().parents[2] / "maps" / "merge.yaml").read_text()
+
+
+@pytest.mark.parametrize("to_end,joins,yields", [
+    (30.0, True, True),    # 30 m before the ramp's end, its route joining main_b: others let it in
+    (30.0, False, False),  # a route that does not join: nobody slows down for it
+    (90.0, True, False),   # still far from the merge
+])
+def test_vehicles_on_the_main_road_let_a_merging_ego_in_at_a_lane_end(tmp_path: Path, to_end: float, joins: bool,
+                                                                      yields: bool) -> None:
+    """The ramp ends into main_b, as main_a does: a car on main_a 40 m further from the merge than
+    the ego treats it as a leader that far ahead of it, within its politeness."""
+    w = world(tmp_path, MERGE, "", ego_lane="ramp", goal=100)
+    idx = {ln.id: k for k, ln in enumerate(w.lanes.lanes)}
+    ramp, main_a = idx["ramp"], idx["main_a"]
+    s_car = float(w.lanes.length[main_a]) - to_end - 40.0
+    w = world(tmp_path, MERGE, f"participants:\n  - {{id: car, start: {{lane: main_a, s: {s_car}}}, speed: 12, "
+                               "idm: {v0: 12}}\n", ego_lane="ramp", goal=100)
+    s_ego = float(w.lanes.length[ramp]) - to_end
+    p, h = w.lanes.pose(np.array([ramp]), np.array([s_ego]))
+    route = (ramp, idx["main_b"]) if joins else (ramp,)
+    states = run(w, 1.0, ego=EgoBox(float(p[0, 0]), float(p[0, 1]), float(h[0]), 10.0, route=route))
+    a = _accel(states, 0)
+    if yields:
+        assert a.max() < 0 and a.min() >= -0.5 * 4.0 - 1e-9  # brakes, within politeness · b_safe
+    else:
+        assert a.min() >= 0  # keeps its own pace
 
 
 def test_a_parked_car_on_the_kerb_is_not_in_the_way(tmp_path: Path) -> None:

@@ -5,8 +5,16 @@ of a neighbouring lane it reaches into (so vehicles there follow it). It *signal
 neighbouring lane — what others read from a turn signal and the car's motion — when its route
 runs along that lane and not along the one it is on (it has to get over: a merge), or when it
 drifts towards it at :data:`SIGNAL_SPEED` or more and would reach it within :data:`SIGNAL_TIME`
-at that rate. Vehicles behind it on that lane then let it in if that costs them no harder braking than
-their politeness allows (:func:`twolevel.world.traffic.step.step`).
+at that rate. It also signals a merge where its lane *ends into* a lane its route continues on
+that other lanes lead into too (an on-ramp joining the main road): within :data:`MERGE_AHEAD` of
+its lane's end, it is a merging car on each of those other lanes, placed as far before their end
+as it is before its own (the "virtual leader" of zipper merging). Vehicles behind it on such a
+lane then let it in if that costs them no harder braking than their politeness allows
+(:func:`twolevel.world.traffic.step.step`).
+
+Its extents along and across a lane are those of its box turned by its heading relative to the
+lane (a car at an angle across a lane line reaches further into the next lane than its centre
+and half width say).
 """
 
 from __future__ import annotations
@@ -19,7 +27,7 @@ from twolevel.world.geometry import LaneSet
 from twolevel.world.traffic.neighbours import transfer
 from twolevel.world.traffic.state import EgoBox
 
-__all__ = ["SIGNAL_SPEED", "SIGNAL_TIME", "EgoView", "view"]
+__all__ = ["SIGNAL_SPEED", "SIGNAL_TIME", "MERGE_AHEAD", "EgoView", "view"]
 
 EDGE_MARGIN = 0.5
 """[m] The lane beside is looked at once the body comes this close to the edge towards it."""
@@ -27,6 +35,8 @@ SIGNAL_SPEED = 0.25
 """[m/s] Least lateral speed towards a neighbouring lane that signals a move into it."""
 SIGNAL_TIME = 3.0
 """[s] A drift signals a move when it would bring the body into the lane within this time."""
+MERGE_AHEAD = 60.0
+"""[m] Within this distance of the end of a lane that merges into its route the ego signals the merge."""
 
 
 @dataclass(frozen=True)
@@ -49,13 +59,15 @@ class EgoView:
 
 def view(lanes: LaneSet, ego: EgoBox) -> EgoView:
     """How traffic sees ``ego`` on ``lanes``."""
-    hl, hw = ego.length / 2, ego.width / 2
     el, es, elat = lanes.lookup(np.array([[ego.x, ego.y]]), heading=np.array([ego.psi]))
     lane, s, lat = int(el[0]), float(es[0]), float(elat[0])
     none3 = (np.zeros(0, dtype=int), np.zeros(0), np.zeros(0))
     if lane < 0:
-        return EgoView(ego, -1, 0.0, 0.0, 0.0, hl, hw, (*none3, np.zeros(0)), none3)
+        return EgoView(ego, -1, 0.0, 0.0, 0.0, ego.length / 2, ego.width / 2, (*none3, np.zeros(0)), none3)
     h = lanes.pose(el, es)[1][0]
+    c, sn = abs(np.cos(ego.psi - h)), abs(np.sin(ego.psi - h))
+    hl = float(ego.length / 2 * c + ego.width / 2 * sn)
+    hw = float(ego.length / 2 * sn + ego.width / 2 * c)
     v = ego.v * np.cos(ego.psi - h)
     body_l, body_s, body_lat, body_v = [lane], [s], [lat], [v]
     merge_l, merge_s, merge_v = [], [], []
@@ -76,6 +88,20 @@ def view(lanes: LaneSet, ego: EgoBox) -> EgoView:
                 body_l.append(int(to[k])), body_s.append(float(st[k])), body_lat.append(float(latt[k])), body_v.append(v_to)
             elif wants or (sign * drift >= SIGNAL_SPEED and abs(latt[k]) - sign * drift * SIGNAL_TIME < reach):
                 merge_l.append(int(to[k])), merge_s.append(float(st[k])), merge_v.append(v_to)
+    for p, s_p in _joining(lanes, ego.route, lane, s):
+        merge_l.append(p), merge_s.append(s_p), merge_v.append(float(v))
     return EgoView(ego, lane, s, lat, float(v), hl, hw,
                    (np.array(body_l), np.array(body_s), np.array(body_lat), np.array(body_v, dtype=float)),
                    (np.array(merge_l, dtype=int), np.array(merge_s, dtype=float), np.array(merge_v, dtype=float)))
+
+
+def _joining(lanes: LaneSet, route: tuple[int, ...], lane: int, s: float) -> list[tuple[int, float]]:
+    """The other lanes leading into the lane the route continues on after ``lane``, when the ego
+    is within :data:`MERGE_AHEAD` of ``lane``'s end at ``s`` [m]: (lane, the ego's place on it
+    [m], as far before its end as the ego is before its own)."""
+    to_end = float(lanes.length[lane]) - s
+    if to_end > MERGE_AHEAD:
+        return []
+    into = [k for k in lanes.lanes[lane].successors if k in route]
+    return [(p, float(lanes.length[p]) - to_end) for p, other in enumerate(lanes.lanes)
+            if p != lane and any(k in other.successors for k in into) and lanes.length[p] >= to_end]
