@@ -168,25 +168,27 @@ def test_vehicles_behind_open_a_gap_for_a_merging_ego(tmp_path: Path, route: boo
 MERGE = (Path(__file__).resolve().parents[2] / "maps" / "merge.yaml").read_text()
 
 
-@pytest.mark.parametrize("to_end,joins,yields", [
-    (30.0, True, True),    # 30 m before the ramp's end, its route joining main_b: others let it in
-    (30.0, False, False),  # a route that does not join: nobody slows down for it
-    (90.0, True, False),   # still far from the merge
+@pytest.mark.parametrize("to_end,joins,v,back,yields", [
+    (30.0, True, 10.0, 40.0, True),    # 30 m before the ramp's end, its route joining main_b: others let it in
+    (30.0, False, 10.0, 40.0, False),  # a route that does not join: nobody slows down for it
+    (90.0, True, 10.0, 40.0, False),   # still far from the merge
+    (30.0, True, 1.0, 100.0, False),   # crawling at the ramp's end: it waits for a gap, nobody stops for it
+    (30.0, True, 2.5, 100.0, True),    # (the car 100 m back would brake gently for it if it moved)
 ])
 def test_vehicles_on_the_main_road_let_a_merging_ego_in_at_a_lane_end(tmp_path: Path, to_end: float, joins: bool,
-                                                                      yields: bool) -> None:
-    """The ramp ends into main_b, as main_a does: a car on main_a 40 m further from the merge than
-    the ego treats it as a leader that far ahead of it, within its politeness."""
+                                                                      v: float, back: float, yields: bool) -> None:
+    """The ramp ends into main_b, as main_a does: a car on main_a ``back`` metres further from the
+    merge than the ego treats it as a leader that far ahead of it, within its politeness."""
     w = world(tmp_path, MERGE, "", ego_lane="ramp", goal=100)
     idx = {ln.id: k for k, ln in enumerate(w.lanes.lanes)}
     ramp, main_a = idx["ramp"], idx["main_a"]
-    s_car = float(w.lanes.length[main_a]) - to_end - 40.0
+    s_car = float(w.lanes.length[main_a]) - to_end - back
     w = world(tmp_path, MERGE, f"participants:\n  - {{id: car, start: {{lane: main_a, s: {s_car}}}, speed: 12, "
                                "idm: {v0: 12}}\n", ego_lane="ramp", goal=100)
     s_ego = float(w.lanes.length[ramp]) - to_end
     p, h = w.lanes.pose(np.array([ramp]), np.array([s_ego]))
     route = (ramp, idx["main_b"]) if joins else (ramp,)
-    states = run(w, 1.0, ego=EgoBox(float(p[0, 0]), float(p[0, 1]), float(h[0]), 10.0, route=route))
+    states = run(w, 1.0, ego=EgoBox(float(p[0, 0]), float(p[0, 1]), float(h[0]), v, route=route))
     a = _accel(states, 0)
     if yields:
         assert a.max() < 0 and a.min() >= -0.5 * 4.0 - 1e-9  # brakes, within politeness · b_safe

@@ -10,7 +10,9 @@ that other lanes lead into too (an on-ramp joining the main road): within :data:
 its lane's end, it is a merging car on each of those other lanes, placed as far before their end
 as it is before its own (the "virtual leader" of zipper merging). Vehicles behind it on such a
 lane then let it in if that costs them no harder braking than their politeness allows
-(:func:`twolevel.world.traffic.step.step`).
+(:func:`twolevel.world.traffic.step.step`) — while it moves (:data:`MERGE_SPEED`): a car that stands
+at the end of a ramp waits for a gap, nobody stops beside it to wait for it (which would leave
+both waiting).
 
 Its extents along and across a lane are those of its box turned by its heading relative to the
 lane (a car at an angle across a lane line reaches further into the next lane than its centre
@@ -27,7 +29,7 @@ from twolevel.world.geometry import LaneSet
 from twolevel.world.traffic.neighbours import transfer
 from twolevel.world.traffic.state import EgoBox
 
-__all__ = ["SIGNAL_SPEED", "SIGNAL_TIME", "MERGE_AHEAD", "EgoView", "view"]
+__all__ = ["SIGNAL_SPEED", "SIGNAL_TIME", "MERGE_AHEAD", "MERGE_SPEED", "EgoView", "view"]
 
 EDGE_MARGIN = 0.5
 """[m] The lane beside is looked at once the body comes this close to the edge towards it."""
@@ -37,6 +39,8 @@ SIGNAL_TIME = 3.0
 """[s] A drift signals a move when it would bring the body into the lane within this time."""
 MERGE_AHEAD = 60.0
 """[m] Within this distance of the end of a lane that merges into its route the ego signals the merge."""
+MERGE_SPEED = 2.0
+"""[m/s] Least speed at which others let the ego in (slower, it waits for a gap)."""
 
 
 @dataclass(frozen=True)
@@ -90,6 +94,8 @@ def view(lanes: LaneSet, ego: EgoBox) -> EgoView:
                 merge_l.append(int(to[k])), merge_s.append(float(st[k])), merge_v.append(v_to)
     for p, s_p in _joining(lanes, ego.route, lane, s):
         merge_l.append(p), merge_s.append(s_p), merge_v.append(float(v))
+    if v < MERGE_SPEED:
+        merge_l, merge_s, merge_v = [], [], []
     return EgoView(ego, lane, s, lat, float(v), hl, hw,
                    (np.array(body_l), np.array(body_s), np.array(body_lat), np.array(body_v, dtype=float)),
                    (np.array(merge_l, dtype=int), np.array(merge_s, dtype=float), np.array(merge_v, dtype=float)))
