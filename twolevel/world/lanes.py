@@ -31,6 +31,7 @@ import numpy as np
 
 from twolevel.world.geometry import MARKINGS, Lane, LaneSet, MarkingRow, lane_from_reference, sample_road
 from twolevel.world.junction import Plan, plan_junctions
+from twolevel.world.layout import road_neighbours
 from twolevel.world.loader import successors
 from twolevel.world.schema import FreeLane, MapFile
 
@@ -109,15 +110,11 @@ def free_lanes(specs: Sequence[FreeLane], index: dict[str, int], succ: dict[str,
 
 
 def _road_adjacency(spec: MapFile, index: dict[str, int], adj: dict[bool, np.ndarray]) -> None:
-    """Lanes of one road beside each other: offsets half their widths apart (in place)."""
-    for road in spec.roads:
-        lanes = sorted(road.lane_specs(), key=lambda ln: ln.offset)
-        for a, b in zip(lanes, lanes[1:]):  # b is left of a in the road's frame
-            if abs((b.offset - a.offset) - 0.5 * (a.width + b.width)) > 1e-6:
-                continue
-            ia, ib = index[a.id], index[b.id]
-            adj[a.direction == "forward"][ia] = ib  # road-left of a: a's left when a runs forward
-            adj[b.direction != "forward"][ib] = ia
+    """Lanes of one road beside each other (:func:`~twolevel.world.layout.road_neighbours`, in place)."""
+    for a, b in road_neighbours(spec):  # b is left of a in the road's frame
+        ia, ib = index[a.id], index[b.id]
+        adj[a.direction == "forward"][ia] = ib  # road-left of a: a's left when a runs forward
+        adj[b.direction != "forward"][ib] = ia
 
 
 def _features(lane: Lane) -> np.ndarray:

@@ -16,6 +16,10 @@ so that whatever ``twolevel check`` accepts can be sampled, planned on and simul
 - successors that do not connect: a lane must start within half a lane width of the end of the
   lane it follows, heading the same way (within 90°).
 
+It also says which lanes lie side by side (:func:`road_neighbours`, one criterion for the runtime's
+lane adjacency in :mod:`twolevel.world.lanes` and for ``check``) and, for ``check``'s scripted lane
+changes, the lane of the same direction beside each lane (:func:`lanes_beside`).
+
 Lengths agree with the sampled lanes (:func:`twolevel.world.geometry.lane_from_reference`) to
 rounding: arcs at an offset are exact, and an offset polyline turns each corner with a chord
 2·|offset|·sin(|turn|/2) long, as the sampled lane does; a free-form lane's centre line is the
@@ -36,7 +40,7 @@ from twolevel.world.document import Document
 from twolevel.world.schema import MIN_PIECE, MIN_WIDTH, FreeLane, LaneSpec, MapFile, Road, Segment
 
 __all__ = ["Pose", "Piece", "pieces", "lane_pieces", "lane_length", "lane_lengths", "lane_ends", "check_layout", "free_centre",
-           "free_ends", "polyline_length", "all_lane_ends", "road_outline"]
+           "free_ends", "polyline_length", "all_lane_ends", "road_outline", "road_neighbours", "lanes_beside"]
 
 
 @dataclass(frozen=True)
@@ -190,6 +194,39 @@ def all_lane_ends(spec: MapFile) -> dict[str, tuple[Pose, Pose, float, float]]:
             _, width = free_centre(lane)
             out[lane.id] = (*free_ends(lane), width[0], width[-1])
     return out
+
+
+def road_neighbours(spec: MapFile) -> Iterator[tuple[LaneSpec, LaneSpec]]:
+    """Lanes of one road beside each other, (a, b) with b left of a in the road's frame: their
+    offsets half their widths apart [m] (to 1e-6 m)."""
+    for road in spec.roads:
+        lanes = sorted(road.lane_specs(), key=lambda ln: ln.offset)
+        for a, b in zip(lanes, lanes[1:]):
+            if abs((b.offset - a.offset) - 0.5 * (a.width + b.width)) <= 1e-6:
+                yield a, b
+
+
+def lanes_beside(spec: MapFile) -> dict[str, tuple[str | None, str | None]]:
+    """Every lane's id → (the lane on its left, the lane on its right) in its direction of travel that runs
+    the same way (within 90° at their starts), or None: road lanes by :func:`road_neighbours`,
+    free-form lanes by their declared ``adjacent_left`` / ``adjacent_right``. The runtime's
+    :attr:`twolevel.world.geometry.LaneSet.left` / ``right`` are the same lanes, except that it also
+    finds undeclared free-form neighbours from their boundaries (numpy, not for ``check``)."""
+    side: dict[str, dict[bool, str]] = {}
+    for a, b in road_neighbours(spec):
+        if a.direction == b.direction:
+            forward = a.direction == "forward"
+            side.setdefault(a.id, {})[forward] = b.id  # b is on a's left when a runs forward
+            side.setdefault(b.id, {})[not forward] = a.id
+    ends = all_lane_ends(spec)
+    for lane in spec.lanes:
+        for left, other in ((True, lane.adjacent_left), (False, lane.adjacent_right)):
+            if other is None or lane.id not in ends or other not in ends:
+                continue
+            turn = _wrap(ends[other][0].heading - ends[lane.id][0].heading)
+            if abs(turn) < math.pi / 2:
+                side.setdefault(lane.id, {})[left] = other
+    return {lid: (side.get(lid, {}).get(True), side.get(lid, {}).get(False)) for lid in ends}
 
 
 def road_outline(road: Road, lane: LaneSpec, step: float = math.radians(5.0)) -> tuple[list[tuple[float, float]], list[tuple[float, float]]]:

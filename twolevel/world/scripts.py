@@ -20,10 +20,10 @@ Imported by ``twolevel check``: standard library only (no numpy).
 from __future__ import annotations
 
 from twolevel.diagnostics import Diagnostic
-from twolevel.world.assumptions import PEDESTRIAN, Assumptions, MotionBounds, from_spec, kinds_of
+from twolevel.world.assumptions import KIND_NAMES, Assumptions, MotionBounds, from_spec, kinds_of, user_of
 from twolevel.world.codes import YML416, YML420, YML440, YML441
 from twolevel.world.document import Document, Path_
-from twolevel.world.layout import adjacent_lanes, lane_lengths
+from twolevel.world.layout import lane_lengths, lanes_beside
 from twolevel.world.schema import MapFile, Manoeuvre, Participant, ScenarioFile
 
 __all__ = ["PHYSICAL_ACCEL", "check_scripts"]
@@ -31,7 +31,6 @@ __all__ = ["PHYSICAL_ACCEL", "check_scripts"]
 PHYSICAL_ACCEL = 11.8
 """[m/s²] More acceleration or braking than any road user's tyres give (1.2 g: μ ≈ 1.2 of the best
 tyres on dry asphalt)."""
-_USER = {"vehicle": 0, "parked": 0, "cyclist": 1, "pedestrian": PEDESTRIAN}
 
 
 def _rates(m: Manoeuvre, at: Path_, doc: Document, bounds: MotionBounds, kind: str) -> list[Diagnostic]:
@@ -120,12 +119,12 @@ def check_scripts(spec: ScenarioFile, doc: Document, m: MapFile) -> list[Diagnos
         return []
     a: Assumptions = from_spec(spec.assumptions)
     ids = [p.id for p in spec.participants]
-    users = kinds_of(ids, a, default=[_USER[p.kind] for p in spec.participants])
-    side, lengths = adjacent_lanes(m), lane_lengths(m)
+    users = kinds_of(ids, a, default=[user_of(p.kind) for p in spec.participants])
+    side, lengths = lanes_beside(m), lane_lengths(m)
     out: list[Diagnostic] = []
     for i, (p, user) in enumerate(zip(spec.participants, users)):
         at: Path_ = ("participants", i)
-        kind = ("vehicle", "cyclist", "pedestrian")[user]
+        kind = KIND_NAMES[user]
         out += _chain(p, at, doc, side, lengths, a.bounds(user), kind)
         out += _walk(p, at, doc, lengths, a.bounds(user))
     return out
