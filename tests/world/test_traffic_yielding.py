@@ -111,3 +111,22 @@ def test_a_walk_of_a_distance_stands_at_its_end(tmp_path: Path) -> None:
     assert states[-1].active[0] and abs(states[-1].y[0] - 1.0) < 1e-3 and states[-1].v[0] == 0.0
     v = np.array([st.v[0] for st in states])
     assert np.abs(np.diff(v)).max() <= 0.6 * DT + 1e-12  # it slows to a stop within its bound
+
+
+def test_regression_an_all_way_stop_lets_one_through_at_a_time(tmp_path: Path) -> None:
+    """Three cars stand at the all-way stop of maps/four_way_stop.yaml (from the south and the north:
+    parallel ways, no conflict; from the east: across both). The west car goes only once the others have cleared the crossing. It used to go a step
+    after them: a car moving off its line at 0.1 m/s was counted 100 s away from the conflict."""
+    four_way = (Path(__file__).resolve().parents[2] / "maps" / "four_way_stop.yaml").read_text()
+    w = world(tmp_path, four_way, "participants:\n"
+              "  - {id: north_1, start: {lane: south_in, s: 67}, speed: 8.0}\n"
+              "  - {id: south_1, start: {lane: north_in, s: 63}, speed: 8.0}\n"
+              "  - {id: west_1, start: {lane: east_in, s: 59}, speed: 8.0}\n", ego_lane="west_in", goal=80)
+    states = run(w, 30.0)
+    # the crossing is the square |x|, |y| < 3.5 at the map's centre: who has a part of its body in it
+    inside = np.array([[abs(st.x[i]) < 3.5 + 2.11 and abs(st.y[i]) < 3.5 + 2.11 and st.active[i]
+                        for i in range(3)] for st in states])
+    assert inside[:, 0].any() and inside[:, 1].any() and inside[:, 2].any()  # everybody crossed
+    assert not (inside[:, 2] & (inside[:, 0] | inside[:, 1])).any()  # west never with the others
+    served = np.array([[st.served[i] >= 0 for i in range(3)] for st in states])
+    assert served.all(axis=1)[-1] and int(np.argmax(served[:, 2])) > int(np.argmax(inside[:, 0])) + 10

@@ -12,7 +12,8 @@ the map has stop signs only, so every stop line gets the conflicts its geometry 
 **Gap acceptance.** A vehicle at a give-way line — standing at a stop line once its stop time
 has passed, or within braking distance of a yield line — goes only when every priority body
 (the ego included) is at least its ``critical_gap`` [s] away from the conflict point (distance
-to it over its speed), none stands in the conflict, and no vehicle that has waited at a line of
+to it over its speed; a vehicle moving off from a give-way line of its own: the time it takes
+accelerating at its IDM ``a``), none stands in the conflict, and no vehicle that has waited at a line of
 its own with a lower index waits for the same conflict (all-way stops: one at a time, in a fixed
 order). A priority vehicle that must itself stop before the conflict (an unserved stop sign or a
 red light on its way) does not count. Default critical gap 6.5 s: the Highway Capacity Manual's
@@ -114,11 +115,12 @@ def conflicts_of(lanes: LaneSet, line_lane: np.ndarray, line_s: np.ndarray) -> C
 
 
 def clear_to_go(conf: Conflicts, line: np.ndarray, who: np.ndarray, gap: np.ndarray, lane: np.ndarray,
-                s: np.ndarray, hl: np.ndarray, v: np.ndarray, held: np.ndarray, waiting: np.ndarray,
-                body: np.ndarray) -> np.ndarray:
+                s: np.ndarray, hl: np.ndarray, v: np.ndarray, accel: np.ndarray, held: np.ndarray,
+                waiting: np.ndarray, body: np.ndarray) -> np.ndarray:
     """Whether each vehicle ``who`` (M,) at give-way ``line`` (M,) may go, accepting a time gap
     ``gap`` (M,) [s]. The bodies (B,) that may have priority — participants, then the ego — are
-    given by ``lane``, ``s`` [m], half length ``hl`` [m], speed along the lane ``v`` [m/s], the s
+    given by ``lane``, ``s`` [m], half length ``hl`` [m], speed along the lane ``v`` [m/s], the
+    acceleration ``accel`` [m/s²] of those moving off from a line of their own (else 0), the s
     [m] of a line they must stop at on their lane (``held``; +inf: none), ``waiting`` (standing
     ready at a give-way line of their own) and ``body`` (a mask of those on a lane)."""
     rows = np.flatnonzero(np.isin(conf.line, line))
@@ -129,7 +131,9 @@ def clear_to_go(conf: Conflicts, line: np.ndarray, who: np.ndarray, gap: np.ndar
     dist = rs[:, None] - s[None, :] - hl[None, :]
     inside = on & (np.abs(s[None, :] - rs[:, None]) < hl[None, :] + ZONE)
     coming = on & (dist >= 0) & (held[None, :] > rs[:, None])
-    tta = np.where(inside, 0.0, np.where(coming, dist / np.maximum(v[None, :], 0.1), np.inf))
+    d, vb, ab = np.maximum(dist, 0.0), v[None, :], accel[None, :]
+    reach = np.where(ab > 0, (np.sqrt(vb**2 + 2 * ab * d) - vb) / np.where(ab > 0, ab, 1.0), d / np.maximum(vb, 0.1))
+    tta = np.where(inside, 0.0, np.where(coming, reach, np.inf))
     first = on & (dist >= -ZONE) & waiting[None, :]  # waits for the same conflict
     B = len(lane)
     mine = conf.line[rows][None, :] == line[:, None]  # (M, R)

@@ -42,6 +42,7 @@ __all__ = ["step", "EGO_IDM"]
 EGO_IDM = np.array([np.nan, 1.6, 2.0, 0.73, 1.67, 4.0])
 """IDM parameters others assume of the ego (the schema's defaults; v0: the limit) [m/s, s, m, m/s², m/s², -]."""
 _SIGN_ZONE = 3.0  # [m] a vehicle this close to a stop line stands "at" it
+_MOVING_OFF = 20.0  # [m] a vehicle within this distance past the line it served is still moving off
 
 
 def step(
@@ -237,10 +238,13 @@ def _give_way(state: TrafficState, parts: Participants, stops: StopLines, eg: Eg
     if len(decide):
         lane, s, hl, v, body = _bodies(state, parts, eg)
         held_all, waiting = held, ready & must
+        sv = np.maximum(state.served, 0)  # moving off from a line served just now: accelerating
+        off = (state.served >= 0) & (stops.lane[sv] == state.lane) & (state.s - stops.s[sv] < _MOVING_OFF)
+        accel = np.where(off & (parts.kind == IDM), parts.idm[:, 3], 0.0)
         if eg is not None:
-            held_all, waiting = np.append(held, np.inf), np.append(waiting, False)
+            held_all, waiting, accel = np.append(held, np.inf), np.append(waiting, False), np.append(accel, 0.0)
         go[decide] = junctions.clear_to_go(conf, sign[decide], decide, parts.critical_gap[decide], lane, s, hl, v,
-                                           held_all, waiting, body)
+                                           accel, held_all, waiting, body)
     served = np.where(go, sign, state.served)
     return served, np.where(go, 0.0, timer)
 
