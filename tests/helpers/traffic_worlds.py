@@ -79,3 +79,15 @@ def run(w: World, seconds: float, ego: Ego = None) -> list[TrafficState]:
                   ego=box)
         out.append(st)
     return out
+
+
+def replay(w: World, trace: Path) -> tuple[list[TrafficState], list[dict[str, float]]]:
+    """The traffic of a simulated run, stepped again against the ego of its ``trace.csv`` (as the
+    closed loop steps it: each step sees the ego at the step's start), and the trace's rows."""
+    import csv
+
+    with open(trace, newline="") as f:
+        rows = [{k: float(r[k]) for k in ("t", "x", "y", "psi", "v")} for r in csv.DictReader(f)]
+    e = w.ego
+    boxes = [EgoBox(r["x"], r["y"], r["psi"], r["v"], e.length, e.width, w.route.lanes) for r in rows]
+    return run(w, len(rows) * w.settings.dt, ego=lambda t: boxes[min(int(round(t / w.settings.dt)), len(boxes) - 1)]), rows

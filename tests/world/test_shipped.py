@@ -14,7 +14,7 @@ from twolevel.world.world import build_world
 
 ROOT = Path(__file__).resolve().parents[2]
 MAPS = sorted((ROOT / "maps").glob("*.yaml")) + [ROOT / "examples/scenario/map.yaml"]
-SCENARIOS = sorted((ROOT / "scenarios").glob("*.yaml")) + [ROOT / "examples/scenario/scenario.yaml"]
+SCENARIOS = sorted((ROOT / "scenarios").rglob("*.yaml")) + [ROOT / "examples/scenario/scenario.yaml"]
 
 
 @pytest.mark.parametrize("path", MAPS, ids=lambda p: p.name)
@@ -34,9 +34,8 @@ def test_scenario_loads_builds_and_checks(path: Path) -> None:
 
 
 def test_paper_scenarios_have_their_structure() -> None:
-    paper = {"comparison", "traffic_rules", "safety", "scalability"}
-    worlds = {p.stem: build_world(load_scenario(p)[0]) for p in SCENARIOS if p.parent.name == "scenarios" and p.stem in paper}
-    assert set(worlds) == paper
+    worlds = {p.stem: build_world(load_scenario(p)[0]) for p in SCENARIOS if p.parent.name == "scenarios"}
+    assert set(worlds) == {"comparison", "traffic_rules", "safety", "scalability"}
     assert len(worlds["comparison"].route.limit_s) >= 4
     assert np.any(worlds["comparison"].route.kappa != 0)
     tr = worlds["traffic_rules"]
