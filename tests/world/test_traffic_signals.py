@@ -7,11 +7,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from twolevel.world.loader import load_scenario
 from twolevel.world.provided import PROVIDED_SIGNALS
 from twolevel.world.signals import StopMemory, TrafficLog, horizon_constants, signals_along, update_stop_memory
-from twolevel.world.traffic import GREEN, RED, YELLOW, EgoBox, nearby, step
-from twolevel.world.world import World, build_world
+from twolevel.world.traffic import GREEN, RED, YELLOW, EgoBox, nearby
+from twolevel.world.world import World
+
+from helpers import traffic_worlds
+from helpers.traffic_worlds import run
 
 MAP = """\
 kind: map
@@ -33,21 +35,8 @@ traffic_lights:
 
 
 def world(tmp: Path, participants: str, extra: str = "") -> World:
-    (tmp / "map.yaml").write_text(MAP)
-    (tmp / "scn.yaml").write_text(
-        "kind: scenario\nmap: map.yaml\nego: {start: {lane: a, s: 0}}\n"
-        "route: {start: {lane: a, s: 0}, goal: {lane: a, s: 390}}\n" + participants + extra)
-    scn, diags = load_scenario(tmp / "scn.yaml")
-    assert scn is not None, diags
-    return build_world(scn)
-
-
-def run(w: World, seconds: float, ego: EgoBox | None = None) -> list:
-    st, out = w.traffic0, [w.traffic0]
-    for _ in range(int(round(seconds / w.settings.dt))):
-        st = step(st, w.settings.dt, lanes=w.lanes, parts=w.parts, limits=w.limits, lights=w.lights, stops=w.stops, ego=ego)
-        out.append(st)
-    return out
+    """The world of a scenario on :data:`MAP` whose ego starts on lane a."""
+    return traffic_worlds.world(tmp, MAP, participants + extra, ego_lane="a", goal=390)
 
 
 def test_light_cycle_with_offset_and_script(tmp_path: Path) -> None:
