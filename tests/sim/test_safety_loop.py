@@ -135,11 +135,12 @@ def test_the_reckless_planner_is_made_safe_by_the_layer(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_regression_it_never_stops_inside_the_crossing_lane_at_a_stop_sign(tmp_path: Path) -> None:
-    """Before: the ego pulled out into a gap, braked when a crossing car came within r_near and
-    stood inside the crossing lane, where it was hit — its fault. Now: no collision, and it never
-    stands where the crossing lanes are (x from 96.5 to 103.5 m, its front 2.11 m ahead)."""
+    """Before: the ego pulled out into a gap and met a crossing car inside the crossing lane — its
+    fault (it used to brake and stand there, a crossing car counting as the car ahead; since a
+    crossing car is none, it drives into one). Now: no collision, and it never stands where the
+    crossing lanes are (x from 96.5 to 103.5 m, its front 2.11 m ahead)."""
     before, _, _ = simulate(tmp_path, "stop_sign_crossing", duration=14.0, safety=False)
-    assert at_fault(before) and "inside lane" in at_fault(before)[0].reason
+    assert at_fault(before) and 96.5 - 2.11 < at_fault(before)[0].x < 103.5 + 2.11
     after, _, run = simulate(tmp_path, "stop_sign_crossing", duration=14.0)
     assert not after.collisions
     x, v = np.asarray(run.columns["x"]), np.asarray(run.columns["v"])
