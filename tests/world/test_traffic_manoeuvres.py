@@ -1,7 +1,7 @@
 """Manoeuvre primitives of scripted participants on small real maps — lane changes, braking to a
 speed, stops that hold, speed profiles over time and distance, lane following — started at a time,
 after the previous one, or by the ego's distance or headway; and what ``check`` says about chains
-it cannot run (YML416/420, YML440) or runs limited to the assumptions (YML441)."""
+it cannot run (YML416/420, YML433) or runs limited to the assumptions (YML434)."""
 
 from __future__ import annotations
 
@@ -109,9 +109,9 @@ def _check(tmp: Path, items: str, *, lane: str = "r", kind: str = "vehicle") -> 
     ("      - {lane_change: left}\n      - {lane_change: left}\n", [("YML420", 11, 23)]),  # no lane left of l
     ("      - {lane_change: right}\n", [("YML420", 10, 23)]),
     ("      - {lane_change: nowhere}\n", [("YML416", 10, 23)]),
-    ("      - {brake_to: 0, decel: 15}\n", [("YML440", 10, 30)]),
-    ("      - {brake_to: 0, decel: 9}\n", [("YML441", 10, 30)]),  # beyond a vehicle's 8 m/s², limited
-    ("      - {speed_profile: [[0, 10], [1, 0]]}\n", [("YML441", 10, 35)]),  # 10 m/s² between the points
+    ("      - {brake_to: 0, decel: 15}\n", [("YML433", 10, 30)]),
+    ("      - {brake_to: 0, decel: 9}\n", [("YML434", 10, 30)]),  # beyond a vehicle's 8 m/s², limited
+    ("      - {speed_profile: [[0, 10], [1, 0]]}\n", [("YML434", 10, 35)]),  # 10 m/s² between the points
     ("      - {lane_change: left, duration: 3}\n      - {brake_to: 2, decel: 6, after_start: 1}\n", []),
 ])
 def test_check_finds_chains_it_cannot_run_at_the_value(tmp_path: Path, items: str, expected: list) -> None:
@@ -119,5 +119,5 @@ def test_check_finds_chains_it_cannot_run_at_the_value(tmp_path: Path, items: st
 
 
 def test_check_judges_a_cyclist_by_a_cyclists_bounds(tmp_path: Path) -> None:
-    assert [c for c, *_ in _check(tmp_path, "      - {brake_to: 0, decel: 7}\n", kind="cyclist")] == ["YML441"]
+    assert [c for c, *_ in _check(tmp_path, "      - {brake_to: 0, decel: 7}\n", kind="cyclist")] == ["YML434"]
     assert _check(tmp_path, "      - {brake_to: 0, decel: 7}\n", kind="vehicle") == []

@@ -40,15 +40,14 @@ YML426 = Code("YML426", "parameter-range-invalid", W, "Some value within a param
 YML427 = Code("YML427", "goal-out-of-reach", W, "The goal cannot be reached within the run (or its deadline) at the speed limits.")
 YML428 = Code("YML428", "duplicate-rule", E,
               "Two rules of a scenario share a name: two rule files define it, or one file is listed twice.")
-YML440 = Code("YML440", "impossible-motion", E, "A scripted participant asks for more acceleration or braking than any tyre gives.")
-YML441 = Code("YML441", "beyond-assumptions", W,
-              "A participant is scripted beyond what the safety layer assumes of its kind; the simulation limits it.")
-
 YML430 = Code("YML430", "look-ahead-invalid", E,
               "The MPC's look-ahead (horizon_s, coarse_dt, coarse_steps) is not whole periods or contradicts itself.")
 YML431 = Code("YML431", "sensing-short", W,
               "The sensing range is shorter than the stopping distance at the speeds the scenario allows.")
 YML432 = Code("YML432", "bend-too-fast", W,
               "A bend of the route cannot be driven at its speed limit within the comfort lateral acceleration.")
+YML433 = Code("YML433", "impossible-motion", E, "A scripted participant asks for more acceleration or braking than any tyre gives.")
+YML434 = Code("YML434", "beyond-assumptions", W,
+              "A participant is scripted beyond what the safety layer assumes of its kind; the simulation limits it.")
 
 __all__ = [name for name in dir() if name.startswith("YML")]

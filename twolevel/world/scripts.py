@@ -6,10 +6,10 @@ What the schema cannot see alone, each at the value that causes it:
   change to a side without a lane of the same direction there, or to a lane that is not beside
   the one the participant is on by then (YML420; followed from its start lane through the
   chain's lane changes — one that drives onto a successor first should name the lane);
-* an acceleration or deceleration no road user can reach (YML440: beyond
+* an acceleration or deceleration no road user can reach (YML433: beyond
   :data:`PHYSICAL_ACCEL`, about 1.2 g, the friction of the best tyres on dry asphalt);
 * motion beyond what the safety layer assumes of the participant's kind
-  (:mod:`twolevel.world.assumptions`; YML441, a warning): a deceleration, acceleration or the
+  (:mod:`twolevel.world.assumptions`; YML434, a warning): a deceleration, acceleration or the
   slope of a speed profile above its ``a_max``, a speed above its ``v_max``. The simulation
   keeps every behaviour within the assumptions (:mod:`twolevel.world.traffic.idm`), so such a
   request is limited; raise the scenario's ``assumptions:`` to let it through.
@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from twolevel.diagnostics import Diagnostic
 from twolevel.world.assumptions import KIND_NAMES, Assumptions, MotionBounds, from_spec, kinds_of, user_of
-from twolevel.world.codes import YML416, YML420, YML440, YML441
+from twolevel.world.codes import YML416, YML420, YML433, YML434
 from twolevel.world.document import Document, Path_
 from twolevel.world.layout import lane_lengths, lanes_beside
 from twolevel.world.schema import MapFile, Manoeuvre, Participant, ScenarioFile
@@ -41,7 +41,7 @@ def _rates(m: Manoeuvre, at: Path_, doc: Document, bounds: MotionBounds, kind: s
             continue
         where = doc.locate(at + (name,), value=True)
         if value > PHYSICAL_ACCEL:
-            out.append(YML440(f"'{name}' = {value:g} m/s² is more than any tyre gives (at most {PHYSICAL_ACCEL:g} m/s²)",
+            out.append(YML433(f"'{name}' = {value:g} m/s² is more than any tyre gives (at most {PHYSICAL_ACCEL:g} m/s²)",
                               where, hint="a hard emergency stop is 8–10 m/s²"))
         elif value > bounds.a_max:
             out.append(_beyond(f"'{name}' = {value:g} m/s²", f"a_max = {bounds.a_max:g} m/s²", kind, where))
@@ -63,7 +63,7 @@ def _rates(m: Manoeuvre, at: Path_, doc: Document, bounds: MotionBounds, kind: s
 
 
 def _beyond(what: str, bound: str, kind: str, where: object) -> Diagnostic:
-    return YML441(f"{what} is beyond what the safety layer assumes of a {kind} ({bound}): it is limited to that",
+    return YML434(f"{what} is beyond what the safety layer assumes of a {kind} ({bound}): it is limited to that",
                   where, hint="raise assumptions.<kind> in the scenario to let it through (the guarantee then covers it)")  # type: ignore[arg-type]
 
 
