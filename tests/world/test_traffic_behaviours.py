@@ -100,7 +100,7 @@ def test_idm_braking_never_exceeds_the_assumed_bound(tmp_path: Path, body: str, 
 def test_a_cyclist_keeps_right_and_brakes_within_its_own_bound(tmp_path: Path) -> None:
     w = world(tmp_path, ONE_LANE, "participants:\n"
               "  - {id: wall, behaviour: stationary, start: {lane: road, s: 100}}\n"
-              "  - {id: bike, kind: cyclist, start: {lane: road, s: 93}, speed: 8}\n", ego_lane="road")
+              "  - {id: bike, kind: bicycle, start: {lane: road, s: 93}, speed: 8}\n", ego_lane="road")
     states = run(w, 5.0)
     assert w.parts.user[1] == CYCLIST and w.parts.length[1] == 1.8
     assert states[0].lateral[1] == pytest.approx(-(3.5 / 2 - 0.65 / 2 - KEEP_RIGHT))
@@ -225,10 +225,10 @@ def test_a_parked_car_half_in_the_lane_blocks_it_only(tmp_path: Path) -> None:
 def test_kinds_are_the_road_users_the_safety_layer_predicts(tmp_path: Path) -> None:
     w = world(tmp_path, TWO_LANES, "participants:\n"
               "  - {id: walker, kind: pedestrian, walk: {lane: r, s: 100}}\n"
-              "  - {id: bike, kind: cyclist, start: {lane: r, s: 20}, speed: 5}\n"
+              "  - {id: bike, kind: bicycle, start: {lane: r, s: 20}, speed: 5}\n"
               "  - {id: parked, kind: parked, start: {lane: r, s: 50, lateral: -2}}\n"
               "  - {id: car, start: {lane: l, s: 20}}\n"
-              "  - {id: odd, kind: cyclist, start: {lane: l, s: 60}}\n"
+              "  - {id: odd, kind: bicycle, start: {lane: l, s: 60}}\n"
               "assumptions: {road_users: {odd: pedestrian}}\n")
     assert list(w.parts.user) == [PEDESTRIAN, CYCLIST, VEHICLE, VEHICLE, PEDESTRIAN]  # road_users wins
     assert list(context(w).kinds) == list(w.parts.user)

@@ -96,7 +96,7 @@ def test_a_braking_request_beyond_the_kinds_bound_is_limited(tmp_path: Path) -> 
 # ------------------------------------------------------------------ what check says
 
 
-def _check(tmp: Path, items: str, *, lane: str = "r", kind: str = "vehicle") -> list[tuple[str, int, int]]:
+def _check(tmp: Path, items: str, *, lane: str = "r", kind: str = "car") -> list[tuple[str, int, int]]:
     (tmp / "map.yaml").write_text(TWO_LANES)
     (tmp / "scn.yaml").write_text(
         "kind: scenario\nmap: map.yaml\nego: {start: {lane: r, s: 0}}\n"
@@ -119,5 +119,5 @@ def test_check_finds_chains_it_cannot_run_at_the_value(tmp_path: Path, items: st
 
 
 def test_check_judges_a_cyclist_by_a_cyclists_bounds(tmp_path: Path) -> None:
-    assert [c for c, *_ in _check(tmp_path, "      - {brake_to: 0, decel: 7}\n", kind="cyclist")] == ["YML434"]
-    assert _check(tmp_path, "      - {brake_to: 0, decel: 7}\n", kind="vehicle") == []
+    assert [c for c, *_ in _check(tmp_path, "      - {brake_to: 0, decel: 7}\n", kind="bicycle")] == ["YML434"]
+    assert _check(tmp_path, "      - {brake_to: 0, decel: 7}\n", kind="car") == []
