@@ -51,6 +51,14 @@ def test_shipped_tree_is_clean() -> None:
     assert payload["files_checked"] == len(list((ROOT / "rules").rglob("*.stl"))) + len(list((ROOT / "maps").glob("*.yaml"))) + len(list((ROOT / "scenarios").rglob("*.yaml"))) + 2
 
 
+def test_regression_a_route_across_a_junction_is_linted_without_a_crash() -> None:
+    """The bend lint looked every lane of the route up among the roads' lanes: a route through a
+    junction's connecting lane was an internal error (KeyError)."""
+    res = run("check", str(ROOT / "examples" / "world" / "four_way_stop.yaml"), "-f", "json")
+    assert res.exit_code == 0, res.stdout
+    assert json.loads(res.stdout)["diagnostics"] == []
+
+
 def test_exit_codes(files: dict[str, Path]) -> None:
     assert run("check", str(files["warn"])).exit_code == 0
     assert run("check", "--strict", str(files["warn"])).exit_code == 1

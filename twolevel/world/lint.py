@@ -188,6 +188,8 @@ def _bends(scn: "Scenario") -> list[Diagnostic]:
     out: list[Diagnostic] = []
     docs: dict[str, object] = {}
     for n, lane_id in enumerate(lanes):
+        if lane_id not in where:  # a junction's connecting lane or a free-form lane: no road arcs to read
+            continue
         i, j, road, lane = where[lane_id]
         lo = spec.route.start.s if n == 0 else -math.inf
         hi = spec.route.goal.s if n == len(lanes) - 1 else math.inf
