@@ -109,5 +109,5 @@ def _joining(lanes: LaneSet, route: tuple[int, ...], lane: int, s: float) -> lis
     if to_end > MERGE_AHEAD:
         return []
     into = [k for k in lanes.lanes[lane].successors if k in route]
-    return [(p, float(lanes.length[p]) - to_end) for p, other in enumerate(lanes.lanes)
-            if p != lane and any(k in other.successors for k in into) and lanes.length[p] >= to_end]
+    feeding = sorted({int(p) for k in into for p in lanes.pred[lanes.pred_ptr[k]:lanes.pred_ptr[k + 1]]} - {lane})
+    return [(p, float(lanes.length[p]) - to_end) for p in feeding if lanes.length[p] >= to_end]
