@@ -66,10 +66,11 @@ def test_the_trace_records_participants_and_criticality(pack_run) -> None:
     closing = cols["v"] - cols["v_lead"] > 0.01
     assert closing.any()
     assert np.allclose(cols["ttc_s"][closing], (cols["d_lead"] / (cols["v"] - cols["v_lead"]))[closing])
-    # the discs cover the boxes: while the ego heads along the (straight) road as the car ahead
+    # the discs cover the boxes: while the ego drives along its lane's centre as the car ahead
     # does, a collision course along the lane is one in the plane, no later; once the MPC steers
-    # away to pass the slow car, the plane's constant velocities may miss it where ttc does not
-    along = np.abs(cols["psi"]) < 0.01
+    # away to pass the slow car (an offset or a heading of a few mrad is enough: 0.01 rad over
+    # 12 m is 0.12 m), the plane's constant velocities may miss it where ttc does not
+    along = (np.abs(cols["psi"]) < 1e-3) & (np.abs(cols["e"]) < 0.1)
     assert along.any()
     assert (cols["ttc_any_s"][along] <= cols["ttc_s"][along] + 1e-9).all()
     # the MPC leaves the quantified rules to the low level; R_G3 it encodes
