@@ -141,6 +141,55 @@ def check(
     raise typer.Exit(pipeline.exit_code(result.diagnostics, strict=strict, exit_zero=exit_zero))
 
 
+@app.command("import")
+def import_command(
+    path: str = typer.Argument(..., metavar="MAP", help="A map of another tool: OpenDRIVE (.xodr)."),
+    out: str = typer.Option(..., "--out", "-o", metavar="DIR", help="Folder the twolevel map is written to (DIR/<name>.yaml)."),
+    include: List[str] = typer.Option(
+        [], "--include", metavar="TYPE", help="Also import lanes of this type (shoulder, parking, biking, sidewalk, bus, restricted); repeatable."),
+    output_format: Optional[OutputFormat] = typer.Option(
+        None, "--output-format", "-f", help="How findings are shown: full, concise, json, github, sarif."),
+    strict: bool = typer.Option(False, "--strict", help="Warnings (elements not converted) fail the import too."),
+) -> None:
+    """Convert another tool's map into a twolevel map of free-form lanes.
+
+    What is not converted is reported at its element and line. Exit 0 when the map was written
+    and passes the map checks, 1 on errors (warnings too under --strict), 2 when the file cannot be used.
+    """
+    from twolevel import interop, pipeline
+    from twolevel.diagnostics import render
+    from twolevel.interop.opendrive import OPTIONAL_KINDS
+
+    if interop.format_of(path) is None:
+        raise typer.BadParameter(f"no importer reads '{path}' (known: {', '.join(interop.FORMATS)})", param_hint="MAP")
+    bad = [t for t in include if t not in OPTIONAL_KINDS]
+    if bad:
+        raise typer.BadParameter(f"unknown lane type(s) {', '.join(bad)} (known: {', '.join(OPTIONAL_KINDS)})",
+                                 param_hint="--include")
+    fmt = output_format or _default_format()
+    result = interop.import_map(path, out, include=tuple(include))
+    diags = pipeline.dedupe(result.diagnostics)
+    sources = {path: read_source(path)} if fmt is OutputFormat.full else {}
+    text = render(fmt.value, diags, sources=sources, files_checked=1, tool_version=__version__)
+    if fmt in (OutputFormat.full, OutputFormat.concise):
+        sys.stderr.write(text)
+        if result.written is not None and result.data is not None:
+            d = result.data
+            _emit(f"wrote {result.written}: {len(d['lanes'])} lanes, {len(d.get('speed_limits', []))} speed-limit signs, "
+                  f"{len(d.get('stop_signs', []))} stop signs, {len(d.get('traffic_lights', []))} lights\n")
+    else:
+        _emit(text)
+    if result.bad_input:
+        raise typer.Exit(EXIT_USAGE)
+    raise typer.Exit(pipeline.exit_code(diags, strict=strict))
+
+
+def read_source(path: str) -> str:
+    from twolevel.files import read_text_quietly
+
+    return read_text_quietly(path, limit=64 << 20)
+
+
 def _parse_consts(items: List[str]) -> dict[str, float]:
     out: dict[str, float] = {}
     for item in items:

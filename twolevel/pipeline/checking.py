@@ -14,6 +14,7 @@ from typing import Iterable, Mapping, Sequence
 
 from twolevel.diagnostics import Diagnostic, Severity, Span
 from twolevel.files import read_text_quietly
+from twolevel.interop import FORMATS, format_of
 from twolevel.pipeline.codes import CLI001, CLI002, CLI003
 from twolevel.pipeline.conversion import FOREIGN_SUFFIXES, foreign_format
 
@@ -55,12 +56,13 @@ def collect_paths(paths: Sequence[str]) -> tuple[list[str], list[Diagnostic]]:
         elif p.exists():
             if raw.endswith(FOREIGN_SUFFIXES) and foreign_format(raw) is not None:
                 files.append(raw)
-            elif not raw.endswith(RULE_SUFFIXES + YAML_SUFFIXES):
+            elif not raw.endswith(RULE_SUFFIXES + YAML_SUFFIXES) and format_of(raw) is None:
                 diags.append(
                     CLI002(
-                        f"'{raw}' is not a rule file (.stl), a map/scenario (.yaml, .yml) or a CommonRoad scenario (.xml)",
+                        f"'{raw}' is not a rule file (.stl), a map/scenario (.yaml, .yml) or a file to import "
+                        f"({', '.join(FORMATS)}, CommonRoad .xml)",
                         Span.whole_file(raw),
-                        hint="pass rule files, maps, scenarios, CommonRoad XML files or folders holding them",
+                        hint="pass rule files, maps, scenarios, other tools' maps and scenarios or folders holding them",
                     )
                 )
             else:
@@ -97,6 +99,9 @@ def check(paths: Sequence[str], *, dt: float | None = None, horizon: int | None 
 
             diags.extend(check_foreign(file))
             sources.setdefault(file, read_text_quietly(file))
+        elif format_of(file) is not None:
+            diags.extend(check_import(file))
+            sources.setdefault(file, read_text_quietly(file))
         else:
             from twolevel.world.lint import lint_world_file
             from twolevel.world.loader import check_world_file
@@ -105,6 +110,24 @@ def check(paths: Sequence[str], *, dt: float | None = None, horizon: int | None 
             diags.extend(lint_world_file(file))
             sources.setdefault(file, read_text_quietly(file))
     return CheckResult(tuple(dedupe(diags)), len(files), sources)
+
+
+def check_import(file: str) -> list[Diagnostic]:
+    """A map of another tool checked through its importer: what the import reports, and what the
+    map checks find in the converted map (at the source file: the converted one is temporary)."""
+    import tempfile
+
+    from twolevel.interop import import_map
+
+    with tempfile.TemporaryDirectory(prefix="twolevel-check-") as tmp:
+        result = import_map(file, tmp)
+        out = []
+        for d in result.diagnostics:
+            if d.span.file.startswith(tmp):
+                d = Diagnostic(d.code, d.severity, f"in the converted map (line {d.span.line}): {d.message}",
+                               Span.whole_file(file), d.hint)
+            out.append(d)
+    return out
 
 
 def dedupe(diags: Iterable[Diagnostic]) -> list[Diagnostic]:
