@@ -99,7 +99,7 @@ def import_map(path: str | os.PathLike[str], out_dir: str | os.PathLike[str], **
     if data is None:
         return Imported(None, None, tuple(diags))
     name = format_of(path)[1]  # type: ignore[index]
-    header = (f"Imported from {Path(path).name} ({name}) by `twolevel import`: free-form lanes <road>_<section>_<lane>.\n"
+    header = (f"Imported from {Path(path).name} ({name}) by `twolevel import`: free-form lanes r<road>_<section>_<lane>.\n"
               "Regenerate rather than edit by hand.")
     text = map_yaml(data, header)
     os.makedirs(out_dir, exist_ok=True)

@@ -13,7 +13,7 @@ junction is renumbered.
 
 **What is converted.** Every lane of the selected types (driving, and the ramps' entry, exit,
 onRamp, offRamp, connectingRamp; shoulders, parking, … on request) in every lane section becomes
-one free-form lane ``<road>_<section>_<lane>`` given by its boundaries in its direction of travel
+one free-form lane ``r<road>_<section>_<lane>`` given by its boundaries in its direction of travel
 (right-hand traffic: lanes with negative ids drive along the reference line; ``rule="LHT"`` roads
 the other way). Boundaries are the centre ± half the width along the normal, sampled at every
 geometry piece's ends and, on curves and where widths or offsets vary, close enough that the
@@ -324,7 +324,7 @@ def _quiet_stderr() -> Iterator[None]:
 
 
 def _lane_key(road: int, section: int, lane: int) -> str:
-    return f"{road}_{section}_{lane}"
+    return f"r{road}_{section}_{lane}"
 
 
 def _marking(kind: str, can_cross: bool) -> str | None:
