@@ -81,7 +81,7 @@ class _Lane:
     element: ET.Element
     id: int
     type: str
-    varying: bool  # width or border polynomial not constant
+    bend: float  # largest |second derivative| of its width or border polynomials [1/m] (0: linear)
     speeds: list[tuple[float, float]]  # (sOffset from the section [m], limit [m/s])
 
 
@@ -101,7 +101,7 @@ class _Road:
     junction: int
     lht: bool
     pieces: list[tuple[float, float, float]]  # (s0, s1, largest |curvature| [1/m], inf: unknown)
-    offset_varies: bool
+    offset_bend: float  # largest |second derivative| of its lane offset [1/m]
     sections: list[_Section] = field(default_factory=list)
     limits: list[tuple[float, float]] = field(default_factory=list)  # road type records (s, limit [m/s])
 
@@ -159,14 +159,27 @@ def _speed(src: XmlSource, el: ET.Element) -> float | None:
     return value
 
 
-def _poly_varies(el: ET.Element) -> bool:
-    return any(float(el.get(k, "0") or 0) != 0 for k in ("b", "c", "d"))
+def _bend(polys: list[ET.Element], span: float = 100.0) -> float:
+    """Largest |second derivative| [1/m] of cubic polynomials a + b·u + c·u² + d·u³ over ``span``
+    [m] (a bound: |2c| + |6d|·span); inf when a coefficient is not a number."""
+    out = 0.0
+    for el in polys:
+        try:
+            c, d = float(el.get("c", "0") or 0), float(el.get("d", "0") or 0)
+        except ValueError:
+            return math.inf
+        out = max(out, abs(2 * c) + abs(6 * d) * span)
+    return out if math.isfinite(out) else math.inf
 
 
 def _curvature(src: XmlSource, geom: ET.Element) -> float:
     """Largest |curvature| [1/m] of a planView piece (inf: not known, sampled at the finest step)."""
     kind = next(iter(geom), None)
-    if kind is None or kind.tag == "line":
+    if kind is None or kind.tag not in ("line", "arc", "spiral", "poly3", "paramPoly3"):
+        src.report(IMP712, f"<geometry> holds <{'nothing' if kind is None else kind.tag}>, not a line, arc, spiral, "
+                           "poly3 or paramPoly3", geom)
+        raise ValueError("geometry")
+    if kind.tag == "line":
         return 0.0
     if kind.tag == "arc":
         return abs(_num(src, kind, "curvature"))
@@ -185,11 +198,7 @@ def _lane(src: XmlSource, el: ET.Element) -> _Lane:
     for tag in ("access", "rule", "height"):
         for extra in el.findall(tag):
             src.report(IMP710, f"lane {el.get('id')}: <{tag}> is not converted", extra)
-    try:
-        varying = len(widths) > 1 or any(_poly_varies(w) for w in widths)
-    except ValueError:
-        varying = True
-    return _Lane(el, _int(src, el, "id"), el.get("type", "none"), varying, speeds)
+    return _Lane(el, _int(src, el, "id"), el.get("type", "none"), _bend(widths), speeds)
 
 
 def _road(src: XmlSource, el: ET.Element) -> _Road | None:
@@ -205,8 +214,7 @@ def _road(src: XmlSource, el: ET.Element) -> _Road | None:
             src.report(IMP712, f"road {rid} has no <planView> geometry; left out", el)
             return None
         offsets = el.findall("lanes/laneOffset")
-        road = _Road(el, rid, length, junction, el.get("rule", "RHT").upper() == "LHT", pieces,
-                     len(offsets) > 1 or any(_poly_varies(o) for o in offsets))
+        road = _Road(el, rid, length, junction, el.get("rule", "RHT").upper() == "LHT", pieces, _bend(offsets))
         secs = el.findall("lanes/laneSection")
         starts = [_num(src, sec, "s") for sec in secs]
         for k, sec in enumerate(secs):
@@ -248,6 +256,24 @@ def _repair(src: XmlSource) -> bool:
                    spirals[0])
         changed = True
     road_ids = {r.get("id") for r in src.root.findall("road")}
+    junction_ids = {j.get("id") for j in src.root.findall("junction")}
+    for r in src.root.findall("road"):
+        for parent in r.findall("link"):
+            for link in list(parent):
+                known = road_ids if link.get("elementType", "road") == "road" else junction_ids
+                target = link.get("elementId", link.get("id"))
+                if target not in known:
+                    src.report(IMP712, f"road {r.get('id')}: its {link.tag} {link.get('elementType', 'road')} {target} "
+                                       "does not exist; the link is left out", link)
+                    parent.remove(link)
+                    changed = True
+    for j in src.root.findall("junction"):
+        for c in list(j.findall("connection")):
+            if c.get("incomingRoad") not in road_ids or c.get("connectingRoad") not in road_ids:
+                src.report(IMP712, f"junction {j.get('id')}: connection {c.get('id')} names a road that does not exist; "
+                                   "left out", c)
+                j.remove(c)
+                changed = True
     taken = set(road_ids) | {j.get("id") for j in src.root.findall("junction")}
     numeric = [int(x) for x in taken if x is not None and x.lstrip("-").isdigit()]
     fresh = max(numeric, default=0) + 1
@@ -277,15 +303,16 @@ def _samples(road: _Road, sec: _Section) -> list[float]:
     """The s [m] at which a section's lanes are sampled: every piece's ends, and between them close
     enough for :data:`TOLERANCE` on curves (or :data:`STEP` where widths or offsets vary)."""
     a, b = sec.s0 + _EPS, sec.s1 - _EPS
-    varying = road.offset_varies or any(ln.varying for ln in sec.lanes.values())
+    bend = road.offset_bend + sum(ln.bend for ln in sec.lanes.values())  # bounds the borders' sideways bend
     out = [a, b]
     for p0, p1, kappa in road.pieces:
         lo, hi = max(p0, a), min(p1, b)
         if hi <= lo:
             continue
-        step = STEP if varying else math.inf
+        step = min(STEP, math.sqrt(8 * TOLERANCE / bend)) if bend > 0 else math.inf
         if kappa > 0:
-            step = min(STEP, math.sqrt(8 * TOLERANCE / kappa)) if math.isfinite(kappa) else 1.0
+            step = min(step, STEP, math.sqrt(8 * TOLERANCE / kappa)) if math.isfinite(kappa) else 1.0
+        step = max(step, 0.25)
         n = max(1, math.ceil((hi - lo) / step)) if math.isfinite(step) else 1
         out.extend(lo + (hi - lo) * i / n for i in range(n + 1))
     out.sort()
@@ -333,15 +360,31 @@ def _marking(kind: str, can_cross: bool) -> str | None:
     return _MARKINGS.get(kind)
 
 
-def _boundaries(m: Any, road: _Road, sec_index: int, lane: _Lane, ss: list[float], forward: bool
-                ) -> tuple[list[list[float]], list[list[float]], Any] | None:
-    """Left and right boundary [[x, y], …] [m] in the direction of travel and the middle waypoint,
-    or None when the reader has no such lane or gives non-finite values."""
+Request = tuple[int, int, list[float], bool, float]
+"""What the reader is asked of one lane: road id, lane id, the s [m] to sample in the order of travel,
+whether travel is opposite to the reader's assumption (negative lanes along s), the s of its end [m]."""
+Answer = tuple[list[list[float]], list[list[float]], str, str, str, list[tuple[int, int, float]]] | None
+"""Left and right boundary [[x, y], …] [m] in the direction of travel, the reader's left and right
+marking types and lane-change permission at the middle sample, and (road, lane, s) of the lanes
+just past the end; None when the reader has no such lane or gives positions that cannot be."""
+
+
+def _read(name: str, text: str, requests: list[Request]) -> list[Answer] | str:
+    """The reader's answers to ``requests`` (in the process that runs it), or why it refused the file."""
+    import carla
+
+    try:
+        with _quiet_stderr():
+            m = carla.Map(name or "map", text)
+    except RuntimeError as exc:
+        return str(exc)
+    return [_answer(m, *req) for req in requests]
+
+
+def _answer(m: Any, road: int, lane: int, order: list[float], flip: bool, end: float) -> Answer:
     left, right, mid = [], [], None
-    flip = forward != (lane.id < 0)  # the reader takes negative lanes to drive along s
-    order = ss if forward else ss[::-1]
     for i, s in enumerate(order):
-        w = m.get_waypoint_xodr(road.id, lane.id, s)
+        w = m.get_waypoint_xodr(road, lane, s)
         if w is None:
             return None
         tf = w.transform
@@ -353,14 +396,49 @@ def _boundaries(m: Any, road: _Road, sec_index: int, lane: _Lane, ss: list[float
         right.append([x - nx, y - ny])
         if i == len(order) // 2:
             mid = w
-    flat = [v for p in left + right for v in p]
-    if not all(math.isfinite(v) for v in flat):
+    if mid is None or not all(math.isfinite(v) for p in left + right for v in p):
         return None
     for k in range(1, len(order)):  # a sample far from where its distance along the road allows: the reader failed
         gap = math.dist(left[k], left[k - 1]) + math.dist(right[k], right[k - 1])
         if gap > 4 * abs(order[k] - order[k - 1]) + 2.0:
             return None
-    return left, right, mid
+    w = m.get_waypoint_xodr(road, lane, end)
+    nexts = [(n.road_id, n.lane_id, n.s) for n in w.next(_LOOK)] if w is not None else []
+    marks = [str(getattr(x, "type", "NONE")) for x in (mid.left_lane_marking, mid.right_lane_marking)]
+    return (left, right, marks[0], marks[1], str(mid.lane_change), nexts)
+
+
+def _isolated(fn: Any, *args: Any) -> tuple[Any, str | None]:
+    """``fn(*args)`` run in a forked child process, so that a crash of the reader's C++ code on a
+    hostile file (a link to a road that does not exist ends in a segmentation fault) is a finding,
+    not the end of twolevel: (result, None), or (None, why it failed). In process where there is no fork."""
+    import pickle
+
+    if not hasattr(os, "fork"):
+        return fn(*args), None
+    r, w = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: answer through the pipe, never return into the caller's code
+        try:
+            os.close(r)
+            try:
+                payload = pickle.dumps((True, fn(*args)), protocol=pickle.HIGHEST_PROTOCOL)
+            except BaseException as exc:  # noqa: BLE001 - reported by the parent
+                payload = pickle.dumps((False, f"{type(exc).__name__}: {exc}"))
+            with os.fdopen(w, "wb") as out:
+                out.write(payload)
+        finally:
+            os._exit(0)
+    os.close(w)
+    with os.fdopen(r, "rb") as inp:
+        data = inp.read()
+    _, status = os.waitpid(pid, 0)
+    if os.WIFSIGNALED(status):
+        return None, f"the reader crashed (signal {os.WTERMSIG(status)})"
+    if os.WEXITSTATUS(status) != 0 or not data:
+        return None, "the reader ended without an answer"
+    ok, value = pickle.loads(data)
+    return (value, None) if ok else (None, f"the reader failed ({value})")
 
 
 def _lane_type(src: XmlSource, lane: _Lane, options: Options) -> str | None:
@@ -369,6 +447,18 @@ def _lane_type(src: XmlSource, lane: _Lane, options: Options) -> str | None:
     if lane.type in options.include:
         return OPTIONAL_KINDS[lane.type]
     return None
+
+
+def _trim_tapers(left: list[list[float]], right: list[list[float]]) -> None:
+    """Drop the samples next to an end where a tapering lane is already narrower than 0.1 m (in
+    place): its ends may be 0 wide, not the points between them."""
+    def width(i: int) -> float:
+        return math.dist(left[i], right[i])
+
+    while len(left) > 2 and width(1) < 0.1:
+        del left[1], right[1]
+    while len(left) > 2 and width(-2) < 0.1:
+        del left[-2], right[-2]
 
 
 def _width_ok(left: list[list[float]], right: list[list[float]]) -> bool:
@@ -552,35 +642,32 @@ def convert(src: XmlSource, options: Options = Options()) -> dict[str, Any] | No
         version = (header.get("revMajor"), header.get("revMinor"))
         if version[0] != "1" or version[1] not in ("4", "5", "6", "7", "8"):
             src.report(IMP713, f"OpenDRIVE {version[0]}.{version[1]}: read as 1.4-1.6", header)
-    changed = _repair(src)
     roads: dict[int, _Road] = {}
+    changed = False
     for el in src.root.findall("road"):
         road = _road(src, el)
-        if road is not None:
-            if road.id in roads:
-                src.report(IMP712, f"road id {road.id} used twice; the second is left out", el)
-                continue
-            roads[road.id] = road
+        if road is not None and road.id in roads:
+            src.report(IMP712, f"road id {road.id} used twice; the second is left out", el)
+            road = None
+        if road is None:  # the reader is not given what the import left out (it may crash on it)
+            src.root.remove(el)
+            changed = True
+            continue
+        roads[road.id] = road
+    changed = _repair(src) or changed
     if not roads:
         src.report(IMP706, "the file has no usable <road>", src.root)
         return None
     try:
-        import carla
+        import carla  # noqa: F401 - imported again where it reads
     except ImportError:
-        src.report(IMP704, "reading OpenDRIVE needs the CARLA client's map parser", src.root,
-                   hint="pip install 'twolevel[opendrive]' (carla 0.9.16, Python 3.11 or 3.12)")
+        src.report(IMP704, "reading OpenDRIVE needs the CARLA client's map parser: pip install 'twolevel[opendrive]'",
+                   src.root, hint="the extra installs carla 0.9.16 (wheels for Python 3.11 and 3.12)")
         return None
     text = ET.tostring(src.root, encoding="unicode") if changed else src.text
     name = (header.get("name") if header is not None else None) or os.path.splitext(os.path.basename(src.file))[0]
-    try:
-        with _quiet_stderr():
-            m = carla.Map(name or "map", text)
-    except RuntimeError as exc:
-        src.report(IMP705, f"the CARLA map parser refused the file: {exc}", src.root)
-        return None
-    built: dict[str, dict] = {}
-    lanes_out: list[dict] = []
-    skipped = 0
+    wanted: list[tuple[_Road, int, _Section, _Lane, str, bool]] = []
+    requests: list[Request] = []
     for road in roads.values():
         for k, sec in enumerate(road.sections):
             ss = _samples(road, sec)
@@ -589,42 +676,52 @@ def convert(src: XmlSource, options: Options = Options()) -> dict[str, Any] | No
                 if kind is None:
                     continue
                 forward = (lane.id < 0) != road.lht
-                got = _boundaries(m, road, k, lane, ss, forward)
-                if got is None:
-                    src.report(IMP712, f"road {road.id} section {k} lane {lane.id}: the reader gives no finite position; "
-                                       "left out", lane.element)
-                    continue
-                left, right, mid = got
-                if not _width_ok(left, right):
-                    skipped += 1
-                    continue
-                key = _lane_key(road.id, k, lane.id)
-                rec: dict[str, Any] = {"id": key, "type": kind, "left_bound": left, "right_bound": right}
-                change = str(mid.lane_change)
-                lm = _marking(str(mid.left_lane_marking.type), change in ("Left", "Both"))
-                rm = _marking(str(mid.right_lane_marking.type), change in ("Right", "Both"))
-                if (forward != (lane.id < 0)):
-                    lm, rm = rm, lm
-                if lm:
-                    rec["left_marking"] = lm
-                if rm:
-                    rec["right_marking"] = rm
-                start_s = sec.s0 if forward else sec.s1
-                limit = _limit_at(lane.speeds, start_s - sec.s0) or _limit_at(road.limits, start_s)
-                if limit is not None:
-                    rec["speed_limit"] = round(limit, 4)
-                rec["_section"], rec["_road"], rec["_lane"], rec["_forward"] = sec, road, lane, forward
-                rec["_length"] = sum(math.hypot(a[0] - b[0], a[1] - b[1]) for a, b in zip(left, left[1:]))
-                rec["_end"] = (sec.s1 - _EPS) if forward else (sec.s0 + _EPS)
-                built[key] = rec
-                lanes_out.append(rec)
+                wanted.append((road, k, sec, lane, kind, forward))
+                requests.append((road.id, lane.id, ss if forward else ss[::-1], forward != (lane.id < 0),
+                                 (sec.s1 - _EPS) if forward else (sec.s0 + _EPS)))
+    answers, crash = _isolated(_read, name or "map", text, requests)
+    if crash is not None or isinstance(answers, str):
+        src.report(IMP705, f"the CARLA map parser refused the file: {answers if crash is None else crash}", src.root,
+                   hint="the findings above may name the element; `twolevel check` the file after fixing it")
+        return None
+    built: dict[str, dict] = {}
+    lanes_out: list[dict] = []
+    skipped = 0
+    for (road, k, sec, lane, kind, forward), got in zip(wanted, answers):
+        if got is None:
+            src.report(IMP712, f"road {road.id} section {k} lane {lane.id}: the reader gives no usable position; "
+                               "left out", lane.element)
+            continue
+        left, right, lm_kind, rm_kind, change, nexts = got
+        _trim_tapers(left, right)
+        if not _width_ok(left, right):
+            skipped += 1
+            continue
+        key = _lane_key(road.id, k, lane.id)
+        rec: dict[str, Any] = {"id": key, "type": kind, "left_bound": left, "right_bound": right}
+        lm = _marking(lm_kind, change in ("Left", "Both"))
+        rm = _marking(rm_kind, change in ("Right", "Both"))
+        if forward != (lane.id < 0):
+            lm, rm = rm, lm
+        if lm:
+            rec["left_marking"] = lm
+        if rm:
+            rec["right_marking"] = rm
+        start_s = sec.s0 if forward else sec.s1
+        limit = _limit_at(lane.speeds, start_s - sec.s0) or _limit_at(road.limits, start_s)
+        if limit is not None:
+            rec["speed_limit"] = round(limit, 4)
+        rec["_section"], rec["_road"], rec["_lane"], rec["_forward"], rec["_next"] = sec, road, lane, forward, nexts
+        rec["_length"] = sum(math.hypot(a[0] - b[0], a[1] - b[1]) for a, b in zip(left, left[1:]))
+        built[key] = rec
+        lanes_out.append(rec)
     if skipped:
         src.report(IMP713, f"{skipped} lane(s) narrower than 0.1 m along their length left out (placeholders)", None)
     if not lanes_out:
         src.report(IMP706, "no lane of the selected types could be converted", src.root,
                    hint="--include shoulder/parking/… imports other lane types")
         return None
-    _link(src, m, roads, built)
+    _link(src, roads, built)
     out: dict[str, Any] = {"speed_limits": [], "stop_signs": [], "traffic_lights": []}
     _signals(src, roads, built, out)
     _inner_limits(roads, built, out)
@@ -644,18 +741,17 @@ def _ends(rec: dict) -> tuple[list[float], list[float], float]:
     return mid[0], mid[1], max(math.dist(a, b) for a, b in zip(lb, rb))
 
 
-def _link(src: XmlSource, m: Any, roads: dict[int, _Road], built: dict[str, dict]) -> None:
+def _link(src: XmlSource, roads: dict[int, _Road], built: dict[str, dict]) -> None:
     """Successors from the reader (just past each lane's end; one that starts away from the end is
     reported and dropped), adjacency within a section."""
     for key, rec in built.items():
         road, lane = rec["_road"], rec["_lane"]
-        w = m.get_waypoint_xodr(road.id, lane.id, rec["_end"])
         succ = []
-        for n in (w.next(_LOOK) if w is not None else []):
-            r = roads.get(n.road_id)
+        for n_road, n_lane, n_s in rec["_next"]:
+            r = roads.get(n_road)
             if r is None or not r.sections:
                 continue
-            other = _lane_key(n.road_id, r.section_at(n.s), n.lane_id)
+            other = _lane_key(n_road, r.section_at(n_s), n_lane)
             if other != key and other in built and other not in succ:
                 end, (start, _, width) = _ends(rec)[1], _ends(built[other])
                 if math.dist(end, start) > 0.5 * width + 0.5:
