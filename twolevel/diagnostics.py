@@ -5,7 +5,8 @@ problems as :class:`Diagnostic` values; only the CLI decides what they mean for 
 One serialised form (:meth:`Diagnostic.to_dict`) feeds every output format.
 
 Codes carry their stage: ``STL1xx`` syntax, ``STL2xx`` types and signals, ``STL3xx`` style and
-portability, ``YML4xx`` maps and scenarios, ``MIL5xx`` encoding and solving, ``SIM6xx``
+portability, ``YML4xx`` maps and scenarios, ``MIL5xx`` encoding and solving, ``IMP7xx`` importing
+other tools' maps, ``SIM6xx``
 simulation. A code is declared once, where its stage lives, with :class:`Code`; declaring it
 registers it in :data:`REGISTRY`.
 
