@@ -176,6 +176,7 @@ def test_signals_become_signs_lights_and_limits_on_their_lanes(tmp_path: Path) -
     limit.add_validity(-2, -1)
     road.add_signal(limit)
     road.add_signal(xodr.Signal(s=190, t=-8, country="DE", Type="206", id="11"))
+    road.add_signal(xodr.Signal(s=195, t=-8, country="DE", Type="294", id="14"))  # the stop sign's line
     road.add_signal(xodr.Signal(s=120, t=8, country="OpenDRIVE", Type="1000001", dynamic=xodr.Dynamic.yes, id="12",
                                 orientation=xodr.Orientation.negative))
     road.add_signal(xodr.Signal(s=100, t=-8, country="DE", Type="101", id="13"))  # a danger sign: not converted
@@ -187,7 +188,7 @@ def test_signals_become_signs_lights_and_limits_on_their_lanes(tmp_path: Path) -
     assert [ln["speed_limit"] for ln in data["lanes"]] == pytest.approx([120 / 3.6] * 4, abs=1e-3)
     assert {(x["lane"], x["s"], round(x["value"] * 3.6)) for x in data["speed_limits"]} == {
         ("r1_0_-1", 50.0, 80), ("r1_0_-2", 50.0, 80)}
-    assert {(x["lane"], x["s"]) for x in data["stop_signs"]} == {("r1_0_-1", 190.0), ("r1_0_-2", 190.0)}
+    assert {(x["lane"], x["s"]) for x in data["stop_signs"]} == {("r1_0_-1", 195.0), ("r1_0_-2", 195.0)}
     # the light faces traffic driving against s: 80 m along the left lanes from their start at s = 200
     assert {(x["lane"], x["s"]) for x in data["traffic_lights"]} == {("r1_0_1", 80.0), ("r1_0_2", 80.0)}
     not_converted = [d for d in result.diagnostics if d.code == "IMP710"]

@@ -32,9 +32,9 @@ Units: m, rad (OpenDRIVE's own), speeds converted to m/s.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
-import re
 import xml.etree.ElementTree as ET
 from bisect import bisect_right
 from dataclasses import dataclass, field
@@ -63,6 +63,7 @@ _SPEED_UNITS = {"m/s": 1.0, "km/h": 1 / 3.6, "mph": 0.44704}
 _SPEED_SIGNS = {("274", None), ("R2-1", None), ("R2", "1")}
 _STOP_SIGNS = {("206", None), ("R1-1", None), ("R1", "1")}
 _STOP_LINES = {("294", None)}
+_LINE_REACH = 30.0  # [m] farthest a stop line may be past its sign or light
 _LIGHT_GREEN, _LIGHT_YELLOW = 20.0, 3.0  # [s] the default program's green and yellow
 
 
@@ -325,26 +326,21 @@ def _samples(road: _Road, sec: _Section) -> list[float]:
     return dedup
 
 
+@contextlib.contextmanager
 def _quiet_stderr() -> Iterator[None]:
     """The reader prints to the C stderr (a georeference warning per map): silence fd 2 meanwhile."""
-    import contextlib
-
-    @contextlib.contextmanager
-    def quiet() -> Iterator[None]:
-        try:
-            saved = os.dup(2)
-        except OSError:
+    try:
+        saved = os.dup(2)
+    except OSError:
+        yield
+        return
+    try:
+        with open(os.devnull, "wb") as null:
+            os.dup2(null.fileno(), 2)
             yield
-            return
-        try:
-            with open(os.devnull, "wb") as null:
-                os.dup2(null.fileno(), 2)
-                yield
-        finally:
-            os.dup2(saved, 2)
-            os.close(saved)
-
-    return quiet()
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
 
 
 # ---------------------------------------------------------------------------------- conversion
@@ -441,7 +437,7 @@ def _isolated(fn: Any, *args: Any) -> tuple[Any, str | None]:
     return (value, None) if ok else (None, f"the reader failed ({value})")
 
 
-def _lane_type(src: XmlSource, lane: _Lane, options: Options) -> str | None:
+def _lane_type(lane: _Lane, options: Options) -> str | None:
     if lane.type in DRIVING:
         return "driving"
     if lane.type in options.include:
@@ -487,7 +483,7 @@ def _signals(src: XmlSource, roads: dict[int, _Road], built: dict[str, dict], ou
         for c in j.findall("controller"):
             junction_of_ctrl[c.get("id")] = j.get("id")
     for road in roads.values():
-        lines: dict[bool, list[float]] = {True: [], False: []}
+        lines: dict[bool, list[tuple[float, ET.Element]]] = {True: [], False: []}  # stop lines by direction
         pending: list[tuple[ET.Element, str, float, bool, list[str], float]] = []
         for sig in road.element.findall("signals/signal"):
             key = (sig.get("type", ""), sig.get("subtype") if sig.get("type") in ("R1", "R2") else None)
@@ -508,7 +504,7 @@ def _signals(src: XmlSource, roads: dict[int, _Road], built: dict[str, dict], ou
                 if orient != "none" and (orient == "+") != forward:
                     continue
                 if kind == "line":
-                    lines[forward].append(s)
+                    lines[forward].append((s, sig))
                     continue
                 lanes = _valid_lanes(src, sig, road, s, forward, built)
                 if not lanes:
@@ -523,9 +519,15 @@ def _signals(src: XmlSource, roads: dict[int, _Road], built: dict[str, dict], ou
                         continue
                     value = v
                 pending.append((sig, kind, s, forward, lanes, value))
+        used: set[int] = set()
         for sig, kind, s, forward, lanes, value in pending:
-            near = [x for x in lines[forward] if (x - s) * (1 if forward else -1) >= -1.0]
-            stop_s = min(near, key=lambda x: abs(x - s)) if near and kind in ("stop", "light") else s
+            stop_s = s
+            if kind in ("stop", "light"):  # its stop line: the nearest one drawn up to 30 m ahead of it
+                ahead = [(abs(x - s), x, line) for x, line in lines[forward]
+                         if -1.0 <= (x - s) * (1 if forward else -1) <= _LINE_REACH]
+                if ahead:
+                    _, stop_s, line = min(ahead, key=lambda a: a[0])
+                    used.add(id(line))
             for lane_id in lanes:
                 rec = built[lane_id]
                 sec = rec["_section"]
@@ -542,16 +544,8 @@ def _signals(src: XmlSource, roads: dict[int, _Road], built: dict[str, dict], ou
                     rec_l = {"id": sid, "lane": lane_id, "s": round(along, 3)}
                     lights.append((sig.get("id", ""), rec_l, ctrl, junction))
                     out["traffic_lights"].append(rec_l)
-        for forward in (True, False):
-            used = set()
-            for sig, kind, s, fw, _, _ in pending:
-                if fw == forward and kind in ("stop", "light") and lines[forward]:
-                    used.add(min(lines[forward], key=lambda x: abs(x - s)))
-            for sig in road.element.findall("signals/signal"):
-                if (sig.get("type"), None) in _STOP_LINES and lines[forward] and float(sig.get("s", "nan") or "nan") not in used \
-                        and len(used) < len(lines[forward]):
-                    src.report(IMP710, f"stop line {sig.get('id')} has no stop sign or light on its lanes; not converted", sig)
-                    break
+        for line in (line for side in lines.values() for _, line in side if id(line) not in used):
+            src.report(IMP710, f"stop line {line.get('id')} has no stop sign or light on its lanes; not converted", line)
     _programs(src, lights)
     for ref in src.root.iter("signalReference"):
         src.report(IMP710, f"signal reference to {ref.get('id')} is not converted (only signals placed on their road)", ref)
@@ -672,7 +666,7 @@ def convert(src: XmlSource, options: Options = Options()) -> dict[str, Any] | No
         for k, sec in enumerate(road.sections):
             ss = _samples(road, sec)
             for lane in sec.lanes.values():
-                kind = _lane_type(src, lane, options)
+                kind = _lane_type(lane, options)
                 if kind is None:
                     continue
                 forward = (lane.id < 0) != road.lht
