@@ -296,10 +296,10 @@ def test_a_reader_crash_is_a_finding() -> None:
     """CARLA's parser dies of a segmentation fault on a <geometry> holding no known piece (the
     import leaves such roads out before it reads); it runs in a child process, so even such a
     crash is an answer, not the end of twolevel."""
-    from twolevel.interop.opendrive import _isolated, _read
+    from twolevel.interop.carla_reader import isolated, read
 
     text = STRAIGHT.format(**_OK).replace("<line/>", "<link/><line/>")
-    answers, why = _isolated(_read, "crash", text, [(1, -1, [1.0, 2.0], False, 99.0)])
+    answers, why = isolated(read, "crash", text, [(1, -1, [1.0, 2.0], False, 99.0)])
     assert answers is None and why is not None and "crashed" in why
-    answers, why = _isolated(_read, "fine", STRAIGHT.format(**_OK), [(1, -1, [1.0, 2.0], False, 99.0)])
+    answers, why = isolated(read, "fine", STRAIGHT.format(**_OK), [(1, -1, [1.0, 2.0], False, 99.0)])
     assert why is None and answers[0][0][0] == pytest.approx([1.0, 0.0], abs=1e-6)
