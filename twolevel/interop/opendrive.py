@@ -4,12 +4,12 @@
 ``carla.Map(name, xodr_text)`` builds CARLA's road network without a server and answers
 ``get_waypoint_xodr(road, lane, s)`` — the centre, heading and width of any lane at any s, in
 OpenDRIVE's own coordinates — and ``Waypoint.next`` across lane sections, roads and junctions.
-It is CARLA's own reading of the maps CARLA users have (why it was chosen, with the
-figures: the README's "`twolevel import`"). Two things it gets wrong are repaired on the XML before it reads it
-(:func:`~twolevel.interop.opendrive_roads.repair`): a spiral whose curvature does not change (``curvStart == curvEnd``, how
-scenariogeneration writes every junction turn) yields NaN positions — it is rewritten as the arc
-(or line) it is; a junction whose id equals a road's id loses every lane entering it — the
-junction is renumbered.
+It is CARLA's own reading of the maps CARLA users have (why it was chosen, with the figures: the
+README's "`twolevel import`"). Two things it gets wrong are repaired on the XML before it reads it
+(:func:`~twolevel.interop.opendrive_roads.repair`): a spiral whose curvature does not change
+(``curvStart == curvEnd``, how scenariogeneration writes every junction turn) yields NaN
+positions — it is rewritten as the arc (or line) it is; a junction whose id equals a road's id
+loses every lane entering it — the junction is renumbered.
 
 **What is converted.** Every lane of the selected types (driving, and the ramps' entry, exit,
 onRamp, offRamp, connectingRamp; shoulders, parking, … on request) in every lane section becomes
