@@ -169,7 +169,7 @@ def import_command(
     fmt = output_format or _default_format()
     result = interop.import_map(path, out, include=tuple(include))
     diags = pipeline.dedupe(result.diagnostics)
-    sources = {path: read_source(path)} if fmt is OutputFormat.full else {}
+    sources = {path: _read_source(path)} if fmt is OutputFormat.full else {}
     text = render(fmt.value, diags, sources=sources, files_checked=1, tool_version=__version__)
     if fmt in (OutputFormat.full, OutputFormat.concise):
         sys.stderr.write(text)
@@ -184,7 +184,8 @@ def import_command(
     raise typer.Exit(pipeline.exit_code(diags, strict=strict))
 
 
-def read_source(path: str) -> str:
+def _read_source(path: str) -> str:
+    """The text of an imported file, for the source lines under its findings (at most 64 MB)."""
     from twolevel.files import read_text_quietly
 
     return read_text_quietly(path, limit=64 << 20)
