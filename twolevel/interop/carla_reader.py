@@ -6,6 +6,7 @@ Units: m, rad."""
 from __future__ import annotations
 
 import contextlib
+import faulthandler
 import math
 import os
 from typing import Any, Iterator
@@ -90,6 +91,7 @@ def isolated(fn: Any, *args: Any) -> tuple[Any, str | None]:
     if pid == 0:  # the child: answer through the pipe, never return into the caller's code
         try:
             os.close(r)
+            faulthandler.disable()  # a crash here is the parent's finding, not a dump on the terminal
             try:
                 payload = pickle.dumps((True, fn(*args)), protocol=pickle.HIGHEST_PROTOCOL)
             except BaseException as exc:  # noqa: BLE001 - reported by the parent
