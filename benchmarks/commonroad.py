@@ -7,7 +7,7 @@ Every ``*.xml`` below DIR that is a CommonRoad scenario is imported (``twolevel 
 conversion), checked, and simulated with the two-level controller and the safety layer. Without
 DIR, the generated samples (:mod:`twolevel.interop.commonroad_samples`: straight, curve, merge,
 signalised and stop-sign intersections) are written to a temporary folder and used. Columns:
-the import's time [ms] and findings (YML442 not converted / YML443 approximated), lanes and
+the import's time [ms] and findings (IMP710 not converted / IMP714 approximated), lanes and
 participants, the goal (reached at [s], or missed), at-fault collisions, each rule's verdict
 (``rule✓``/``rule✗``: held / violated somewhere), the control step's wall time p50 / p99 [ms].
 Needs commonroad-io (``pip install 'twolevel[commonroad]'``).
@@ -29,21 +29,21 @@ DEFAULT_RULES = [ROOT / "rules" / f"{name}.stl" for name in ("speed_limit", "sto
 
 
 def _scenarios(folder: Path) -> list[Path]:
-    from twolevel.pipeline.conversion import foreign_format
+    from twolevel.interop import format_of
 
-    return sorted(p for p in folder.rglob("*.xml") if foreign_format(p) == "commonroad")
+    return sorted(p for p in folder.rglob("*.xml") if (f := format_of(p)) is not None and f.name == "CommonRoad")
 
 
 def _one(xml: Path, out: Path, rules: list[str], duration: float | None) -> dict:
-    from twolevel.pipeline.conversion import import_scenario
+    from twolevel.interop import import_file
     from twolevel.sim.engine import simulate_scenario
 
     t0 = time.perf_counter()
-    res = import_scenario(str(xml), str(out), rules)
+    res = import_file(xml, out, rules=rules)
     import_ms = 1e3 * (time.perf_counter() - t0)
     row: dict = {"name": xml.stem, "import_ms": import_ms,
-                 "442": sum(d.code == "YML442" for d in res.diagnostics),
-                 "443": sum(d.code == "YML443" for d in res.diagnostics),
+                 "710": sum(d.code == "IMP710" for d in res.diagnostics),
+                 "714": sum(d.code == "IMP714" for d in res.diagnostics),
                  "errors": [f"{d.code} {d.message}" for d in res.diagnostics if d.is_error]}
     if not res.written or row["errors"]:
         return row
@@ -127,7 +127,7 @@ def main() -> None:
     print(f"\n{len(done)}/{len(rows)} imported and simulated; goal reached in "
           f"{sum(r.get('goal') is not None for r in done)}; at-fault collisions {sum(r.get('at_fault', 0) for r in done)}; "
           f"runs with a rule violated {sum(not all(r.get('rules', {}).values()) for r in done)}; findings "
-          f"YML442 {sum(r['442'] for r in rows)}, YML443 {sum(r['443'] for r in rows)}; worst step p99 "
+          f"IMP710 {sum(r['710'] for r in rows)}, IMP714 {sum(r['714'] for r in rows)}; worst step p99 "
           f"{max((r['p99'] for r in done), default=float('nan')):.1f} ms")
     if args.lanelets:
         _big(args.lanelets, work)

@@ -46,8 +46,8 @@ def _timed(label: str, fn, *args, **kw):  # noqa: ANN001, ANN002, ANN003, ANN202
 
 
 def main(n: int = 9) -> None:
-    from twolevel.interop import map_yaml
     from twolevel.interop.opendrive import Options, convert
+    from twolevel.interop.output import to_yaml
     from twolevel.interop.source import read_xml
     from twolevel.world.document import MAX_BYTES, MAX_NODES
 
@@ -58,7 +58,7 @@ def main(n: int = 9) -> None:
         print(f"grid {n}×{n}: {size / 1e6:.2f} MB OpenDRIVE, {path.read_text().count('<road ')} roads")
         (src, _), w_read, c_read = _timed("read XML (element lines)", read_xml, path)
         data, w_conv, c_conv = _timed("convert (CARLA parser in a child)", convert, src, Options())
-        text, w_yaml, c_yaml = _timed("YAML text", map_yaml, data)
+        text, w_yaml, c_yaml = _timed("YAML text", to_yaml, data)
         _, w_write, c_write = _timed("write", (Path(tmp) / "out.yaml").write_text, text)
         wall, cpu = w_read + w_conv + w_yaml + w_write, c_read + c_conv + c_yaml + c_write
         points = sum(len(ln["left_bound"]) for ln in data["lanes"])

@@ -47,7 +47,7 @@ ROOT = Path(__file__).resolve().parents[1] / "twolevel"
 STAGE_PREFIXES = {  # the codes.py of each stage and the codes it may declare
     "stl": ("STL",), "world": ("YML",), "compiler": ("MIL50",), "control": ("MIL51", "MIL52", "MIL53"),
     "monitor": ("SIM60",), "sim": ("SIM61",), "verdict": ("SIM62",), "pipeline": ("CLI",),
-    "interop": ("IMP", "YML44"),
+    "interop": ("IMP",),
 }
 
 

@@ -143,40 +143,53 @@ def check(
 
 @app.command("import")
 def import_command(
-    path: str = typer.Argument(..., metavar="MAP", help="A map of another tool: OpenDRIVE (.xodr)."),
-    out: str = typer.Option(..., "--out", "-o", metavar="DIR", help="Folder the twolevel map is written to (DIR/<name>.yaml)."),
+    path: str = typer.Argument(..., metavar="FILE", help="A map or scenario of another tool: OpenDRIVE (.xodr), CommonRoad (.xml)."),
+    out: str = typer.Option(..., "--out", "-o", metavar="DIR", help="Folder the twolevel files are written to."),
     include: List[str] = typer.Option(
-        [], "--include", metavar="TYPE", help="Also import lanes of this type (shoulder, parking, biking, sidewalk, bus, restricted); repeatable."),
+        [], "--include", metavar="TYPE", help="OpenDRIVE: also import lanes of this type (shoulder, parking, biking, sidewalk, bus, restricted); repeatable."),
+    rules: List[str] = typer.Option([], "--rules", "-r", metavar="RULES.stl", help="CommonRoad: a rule file the scenario lists (repeatable)."),
     output_format: Optional[OutputFormat] = typer.Option(
         None, "--output-format", "-f", help="How findings are shown: full, concise, json, github, sarif."),
-    strict: bool = typer.Option(False, "--strict", help="Warnings (elements not converted) fail the import too."),
+    strict: bool = typer.Option(False, "--strict", help="Warnings (elements not converted exactly) fail the import too."),
 ) -> None:
-    """Convert another tool's map into a twolevel map of free-form lanes.
+    """Convert another tool's map or scenario into twolevel files: an OpenDRIVE map into DIR/<name>.yaml
+    (free-form lanes; pip install 'twolevel[opendrive]'), a CommonRoad scenario into DIR/map.yaml and
+    DIR/scenario.yaml (pip install 'twolevel[commonroad]').
 
-    What is not converted is reported at its element and line. Exit 0 when the map was written
-    and passes the map checks, 1 on errors (warnings too under --strict), 2 when the file cannot be used.
+    What does not convert exactly is reported at its element and line (IMP7xx). Exit 0 when the files
+    were written and pass the checks, 1 on errors (warnings too under --strict), 2 when the file cannot be used.
     """
     from twolevel import interop, pipeline
     from twolevel.diagnostics import render
-    from twolevel.interop.opendrive import OPTIONAL_KINDS
 
-    if interop.format_of(path) is None:
-        raise typer.BadParameter(f"no importer reads '{path}' (known: {', '.join(interop.FORMATS)})", param_hint="MAP")
-    bad = [t for t in include if t not in OPTIONAL_KINDS]
-    if bad:
-        raise typer.BadParameter(f"unknown lane type(s) {', '.join(bad)} (known: {', '.join(OPTIONAL_KINDS)})",
-                                 param_hint="--include")
+    fmt_in = interop.format_of(path)
+    if fmt_in is None:
+        known = ", ".join(f"{f.name} {f.suffix}" for f in interop.FORMATS)
+        raise typer.BadParameter(f"no importer reads '{path}' (known: {known})", param_hint="FILE")
+    options: dict[str, object] = {}
+    if include:
+        from twolevel.interop.opendrive import OPTIONAL_KINDS
+
+        if fmt_in.name != "OpenDRIVE":
+            raise typer.BadParameter(f"--include applies to OpenDRIVE maps, not {fmt_in.name}", param_hint="--include")
+        bad = [t for t in include if t not in OPTIONAL_KINDS]
+        if bad:
+            raise typer.BadParameter(f"unknown lane type(s) {', '.join(bad)} (known: {', '.join(OPTIONAL_KINDS)})",
+                                     param_hint="--include")
+        options["include"] = tuple(include)
+    if rules:
+        if fmt_in.name != "CommonRoad":
+            raise typer.BadParameter(f"--rules applies to CommonRoad scenarios, not {fmt_in.name}", param_hint="--rules")
+        options["rules"] = tuple(rules)
     fmt = output_format or _default_format()
-    result = interop.import_map(path, out, include=tuple(include))
+    result = interop.import_file(path, out, **options)
     diags = pipeline.dedupe(result.diagnostics)
     sources = {path: _read_source(path)} if fmt is OutputFormat.full else {}
     text = render(fmt.value, diags, sources=sources, files_checked=1, tool_version=__version__)
     if fmt in (OutputFormat.full, OutputFormat.concise):
         sys.stderr.write(text)
-        if result.written is not None and result.data is not None:
-            d = result.data
-            _emit(f"wrote {result.written}: {len(d['lanes'])} lanes, {len(d.get('speed_limits', []))} speed-limit signs, "
-                  f"{len(d.get('stop_signs', []))} stop signs, {len(d.get('traffic_lights', []))} lights\n")
+        for written in result.written:
+            _emit(f"wrote {written}" + (f": {result.summary}" if written == result.written[0] and result.summary else "") + "\n")
     else:
         _emit(text)
     if result.bad_input:
@@ -513,31 +526,6 @@ def report(
     raise typer.Exit(EXIT_OK)
 
 
-@app.command("import")
-def import_(
-    source: str = typer.Argument(..., metavar="SCENARIO.xml", help="A CommonRoad scenario (XML)."),
-    out: str = typer.Option(..., "--out", "-o", metavar="DIR", help="Where to write map.yaml and scenario.yaml."),
-    rules: List[str] = typer.Option([], "--rules", "-r", metavar="RULES.stl", help="A rule file the scenario lists (repeatable)."),
-    strict: bool = typer.Option(False, "--strict", help="Exit 1 when anything did not convert exactly."),
-) -> None:
-    """Convert a CommonRoad scenario into a twolevel map and scenario (pip install 'twolevel[commonroad]').
-
-    What does not convert exactly is listed (YML442/YML443, at the XML element's line). Exit 0 when
-    the written files check clean, 1 when they do not (or, with --strict, when something did not
-    convert), 2 when the source cannot be read.
-    """
-    from twolevel import pipeline
-    from twolevel.pipeline.conversion import import_scenario
-
-    res = import_scenario(source, out, rules)
-    _print_diagnostics(list(res.diagnostics))
-    if not res.written:
-        raise typer.Exit(EXIT_USAGE)
-    for path in res.written:
-        _emit(f"wrote {path}\n")
-    raise typer.Exit(pipeline.exit_code(res.diagnostics, strict=strict))
-
-
 class ExportFormat(str, enum.Enum):
     commonroad = "commonroad"
 
@@ -551,7 +539,7 @@ def export(
     """Export a run for other tools: with --format commonroad, solution.xml (the ego's trajectory,
     kinematic single-track states) and the scenario with the ego as a dynamic obstacle.
 
-    Exit 0 when written (what the format cannot hold is listed, YML444), 2 when the run cannot be
+    Exit 0 when written (what the format cannot hold is listed, IMP730), 2 when the run cannot be
     read or the format's package is missing.
     """
     from twolevel.pipeline.conversion import export_run

@@ -95,14 +95,14 @@ def write(odr: xodr.OpenDrive, path: Path) -> Path:
 
 
 def main() -> int:
-    from twolevel.interop import import_map
+    from twolevel.interop import import_file
 
     xodr_path = write(town(), HERE / "town.xodr")
-    result = import_map(xodr_path, HERE)
+    result = import_file(xodr_path, HERE)
     for d in result.diagnostics:
         print(f"{d.span}: {d.code} {d.message}", file=sys.stderr)
-    print(f"wrote {xodr_path.name} and {result.written.name if result.written else 'nothing'}")
-    return 2 if result.bad_input or result.written is None else 0
+    print(f"wrote {xodr_path.name} and {result.written[0].name if result.written else 'nothing'}")
+    return 2 if result.bad_input else 0
 
 
 if __name__ == "__main__":

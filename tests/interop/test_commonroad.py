@@ -49,7 +49,7 @@ def _line_of(path: Path, pattern: str) -> int:
 @pytest.mark.parametrize("name", [stem.split("_")[1].split("-")[0] for stem in SAMPLES])
 def test_every_sample_imports_into_files_that_check_and_build(samples: dict[str, Path], tmp_path: Path, name: str) -> None:
     imp, diags = _imported(samples[name], tmp_path)
-    assert all(d.severity.value == "warning" and d.code in ("YML442", "YML443") for d in diags), diags
+    assert all(d.severity.value == "warning" and d.code in ("IMP710", "IMP714") for d in diags), diags
     found = check_world_file(tmp_path / "scenario.yaml")
     assert not [d for d in found if d.is_error], found
     scn, _ = load_scenario(tmp_path / "scenario.yaml")
@@ -81,7 +81,7 @@ def test_straight_road_lanes_signs_obstacles_and_a_rectangle_goal(samples: dict[
     assert sc["controller"]["dt"] == 0.1 and sc["run"]["duration"] == pytest.approx(25.0)
     # the goal's speed and heading windows are not judged: said at the planning problem's line
     line = _line_of(samples["Straight"], r'<planningProblem id="1000"')
-    assert {(d.code, d.span.line) for d in diags} == {("YML442", line)}
+    assert {(d.code, d.span.line) for d in diags} == {("IMP710", line)}
     assert {"speed window", "heading window"} <= {w for d in diags for w in ("speed window", "heading window") if w in d.message}
 
 
@@ -92,7 +92,7 @@ def test_curve_polygon_zone_truck_and_a_circle_goal(samples: dict[str, Path], tm
     assert zone["kind"] == "other" and zone["box"] == {"length": 6.0, "width": 2.0}
     assert zone["start"]["x"] == pytest.approx(43.0) and zone["start"]["y"] == pytest.approx(-5.0)  # the polygon's centre
     assert parts["O602"]["kind"] == "truck"
-    approx = [d for d in diags if d.code == "YML443"]
+    approx = [d for d in diags if d.code == "IMP714"]
     assert len(approx) == 1 and "bounding box" in approx[0].message
     assert approx[0].span.line == _line_of(samples["Curve"], r'<staticObstacle id="501"')
     goal = imp.scenario["route"]["goal"]
@@ -131,9 +131,9 @@ def test_signalised_intersection_light_agrees_with_commonroad_at_every_step(samp
     kinds = dict(world.assumptions.road_users)  # cyclists and pedestrians to the safety layer
     assert kinds == {"O604": 2, "O605": 1}
     codes = sorted((d.code, d.message.split(":")[0]) for d in diags)
-    assert ("YML443", "traffic light 200") in codes  # red-yellow as red
-    assert any(d.code == "YML442" and "goal state 2 of 2" in d.message for d in diags)
-    assert any(d.code == "YML442" and d.span.line == _line_of(samples["Signal"], r'<intersection id="301"') for d in diags)
+    assert ("IMP714", "traffic light 200") in codes  # red-yellow as red
+    assert any(d.code == "IMP710" and "goal state 2 of 2" in d.message for d in diags)
+    assert any(d.code == "IMP710" and d.span.line == _line_of(samples["Signal"], r'<intersection id="301"') for d in diags)
     assert imp.scenario["route"]["goal"]["lane"] == "L40"
 
 
@@ -161,21 +161,21 @@ def test_unreadable_files_are_findings_not_tracebacks(tmp_path: Path) -> None:
     broken = tmp_path / "broken.xml"
     broken.write_text('<?xml version="1.0"?>\n<commonRoad>\n  <lanelet id="1">\n</commonRoad>\n')
     imp, diags = import_commonroad(broken)
-    assert imp is None and diags[0].code == "YML441" and diags[0].span.line == 4
+    assert imp is None and diags[0].code == "IMP702" and diags[0].span.line == 4
     empty = tmp_path / "empty.xml"
     empty.write_text('<?xml version="1.0"?>\n<commonRoad timeStepSize="0.1" commonRoadVersion="2020a" '
                      'benchmarkID="ZAM_Empty-1_1_T-1" author="" affiliation="" source="" date="2024-01-01"/>\n')
     imp, diags = import_commonroad(empty)
-    assert imp is None and [d.code for d in diags] == ["YML441"]
+    assert imp is None and [d.code for d in diags] == ["IMP703"]
     res = runner.invoke(app, ["import", str(broken), "--out", str(tmp_path / "out")])
-    assert res.exit_code == 2 and "YML441" in res.output and "Traceback" not in res.output
+    assert res.exit_code == 2 and "IMP702" in res.output and "Traceback" not in res.output
     assert not (tmp_path / "out").exists()
 
 
 def test_without_commonroad_io_the_importer_says_what_to_install(samples: dict[str, Path], monkeypatch) -> None:  # noqa: ANN001
     monkeypatch.setitem(sys.modules, "commonroad", None)  # what `import commonroad` meets when it is not installed
     imp, diags = import_commonroad(samples["Merge"])
-    assert imp is None and diags[0].code == "YML440" and "twolevel[commonroad]" in diags[0].hint
+    assert imp is None and diags[0].code == "IMP704" and "twolevel[commonroad]" in diags[0].hint
 
 
 @pytest.mark.slow
@@ -183,10 +183,10 @@ def test_cli_import_and_check_accept_the_xml(samples: dict[str, Path], tmp_path:
     res = runner.invoke(app, ["import", str(samples["StopSign"]), "--out", str(tmp_path)])
     assert res.exit_code == 0, res.output
     assert (tmp_path / "map.yaml").exists() and yaml.safe_load((tmp_path / "scenario.yaml").read_text())["map"] == "map.yaml"
-    assert "YML442" in res.output  # the yield sign
+    assert "IMP710" in res.output  # the yield sign
     assert runner.invoke(app, ["import", str(samples["StopSign"]), "--out", str(tmp_path), "--strict"]).exit_code == 1
     chk = runner.invoke(app, ["check", str(samples["StopSign"]), "-f", "concise"])
-    assert chk.exit_code == 0 and f"{samples['StopSign']}:{_line_of(samples['StopSign'], '<trafficSign id=.102.')}:1: YML442" in chk.output
+    assert chk.exit_code == 0 and f"{samples['StopSign']}:{_line_of(samples['StopSign'], '<trafficSign id=.102.')}:1: IMP710" in chk.output
     assert runner.invoke(app, ["check", str(samples["StopSign"]), "--strict"]).exit_code == 1
     assert runner.invoke(app, ["check", str(samples["Merge"])]).exit_code == 0
 

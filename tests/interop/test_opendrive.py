@@ -18,17 +18,17 @@ xodr = pytest.importorskip("scenariogeneration.xodr")
 
 from helpers import opendrive_maps as om  # noqa: E402
 from twolevel.cli import app  # noqa: E402
-from twolevel.interop import import_map  # noqa: E402
+from twolevel.interop import import_file  # noqa: E402
 
 runner = CliRunner()
 TOL = 0.02  # [m] how far an imported boundary may lie from the oracle's (sampling sag is 0.01 m)
 
 
 def _imported(path: Path, out: Path, **options: object) -> dict:
-    result = import_map(path, out, **options)
-    assert result.written is not None, [str(d) for d in result.diagnostics]
+    result = import_file(path, out, **options)
+    assert result.written, [str(d) for d in result.diagnostics]
     assert not [d for d in result.diagnostics if d.is_error], [f"{d.code} {d.message}" for d in result.diagnostics]
-    return {ln["id"]: ln for ln in result.data["lanes"]} | {"_data": result.data}
+    return {ln["id"]: ln for ln in result.map["lanes"]} | {"_data": result.map}
 
 
 def _assert_borders(path: Path, lanes: dict, road: str, section: int, lane: int, s: np.ndarray) -> None:
@@ -183,8 +183,8 @@ def test_signals_become_signs_lights_and_limits_on_their_lanes(tmp_path: Path) -
     odr = xodr.OpenDrive("signals")
     odr.add_road(road)
     path = om.write(odr, tmp_path / "signals.xodr")
-    result = import_map(path, tmp_path / "out")
-    data = result.data
+    result = import_file(path, tmp_path / "out")
+    data = result.map
     assert [ln["speed_limit"] for ln in data["lanes"]] == pytest.approx([120 / 3.6] * 4, abs=1e-3)
     assert {(x["lane"], x["s"], round(x["value"] * 3.6)) for x in data["speed_limits"]} == {
         ("r1_0_-1", 50.0, 80), ("r1_0_-2", 50.0, 80)}
@@ -221,10 +221,10 @@ def test_degenerate_spirals_and_colliding_junction_ids_are_repaired_and_said(tmp
     odr.add_junction_creator(jc)
     path = om.write(odr, tmp_path / "collide.xodr")
     assert 'curvStart="' in path.read_text()
-    result = import_map(path, tmp_path / "out")
+    result = import_file(path, tmp_path / "out")
     repaired = sorted(d.message.split(" ")[0] + d.message.split(" ")[1] for d in result.diagnostics if d.code == "IMP711")
     assert any("junctionid" in m for m in repaired) and any("spiral" in m for m in repaired), repaired
-    lanes = {ln["id"]: ln for ln in result.data["lanes"]}
+    lanes = {ln["id"]: ln for ln in result.map["lanes"]}
     assert lanes["r1_0_-1"].get("successors"), "without the renumbering no lane enters the junction"
     assert not [d for d in result.diagnostics if d.is_error]
 

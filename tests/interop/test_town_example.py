@@ -12,17 +12,17 @@ from typer.testing import CliRunner
 pytest.importorskip("carla")
 
 from twolevel.cli import app  # noqa: E402
-from twolevel.interop import import_map  # noqa: E402
+from twolevel.interop import import_file  # noqa: E402
 
 TOWN = Path(__file__).resolve().parents[2] / "examples" / "town"
 runner = CliRunner()
 
 
 def test_the_committed_map_is_the_import_of_the_committed_xodr(tmp_path: Path) -> None:
-    result = import_map(TOWN / "town.xodr", tmp_path)
+    result = import_file(TOWN / "town.xodr", tmp_path)
     assert not [d for d in result.diagnostics if d.is_error]
-    assert result.written is not None
-    assert result.written.read_text() == (TOWN / "town.yaml").read_text(), "run examples/town/generate.py"
+    assert result.written
+    assert result.written[0].read_text() == (TOWN / "town.yaml").read_text(), "run examples/town/generate.py"
 
 
 def test_the_town_scenarios_check_clean() -> None:

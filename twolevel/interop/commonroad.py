@@ -27,8 +27,8 @@ lxml, which it brings, gives each element's line for the findings):
   standing; a time window → ``expect.goal`` ``after`` / ``by`` [s]; dt → ``controller.dt``.
 
 Everything else (yield and priority signs, intersections' right of way, goal speeds and
-headings, further planning problems, environment obstacles, …) is a ``YML442`` finding at its
-element's line; conversions that lose detail are ``YML443`` (:mod:`twolevel.interop.codes`).
+headings, further planning problems, environment obstacles, …) is an ``IMP710`` finding at its
+element's line; conversions that lose detail are ``IMP714`` (:mod:`twolevel.interop.codes`).
 """
 
 from __future__ import annotations
@@ -40,10 +40,11 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from twolevel.diagnostics import Diagnostic, Span
-from twolevel.interop.codes import YML440, YML441, YML442, YML443
-from twolevel.interop.output import MAP_FILE, Imported
+from twolevel.interop.codes import IMP701, IMP702, IMP703, IMP704, IMP706, IMP710, IMP714
+from twolevel.interop import ImportResult
+from twolevel.interop.output import MAP_FILE, SCENARIO_FILE, Imported, write_imported
 
-__all__ = ["import_commonroad", "lane_id", "obstacle_id", "LANE_TYPES", "CATEGORIES", "MARKINGS", "KINDS"]
+__all__ = ["import_file", "import_commonroad", "lane_id", "obstacle_id", "LANE_TYPES", "CATEGORIES", "MARKINGS", "KINDS"]
 
 KMH = 1.0 / 3.6
 LANE_TYPES = {"shoulder": "shoulder", "busLane": "bus", "busStop": "bus", "bicycleLane": "bicycle",
@@ -175,7 +176,7 @@ class _Importer:
             if use:
                 lane["type"] = use[0]
                 if len(use) > 1:
-                    self.note(YML443, f"lanelet {lid} has the uses {', '.join(use)}: imported as a {use[0]} lane",
+                    self.note(IMP714, f"lanelet {lid} has the uses {', '.join(use)}: imported as a {use[0]} lane",
                               self.lines.at(lid))
             cats = sorted({CATEGORIES[t] for t in types if t in CATEGORIES})
             if cats:
@@ -192,7 +193,7 @@ class _Importer:
                 if kind is not None:
                     lane[f"{side}_marking"] = kind
             if ll.user_bidirectional:
-                self.note(YML442, f"lanelet {lid} is bidirectional for {', '.join(sorted(u.value for u in ll.user_bidirectional))}: "
+                self.note(IMP710, f"lanelet {lid} is bidirectional for {', '.join(sorted(u.value for u in ll.user_bidirectional))}: "
                           "imported one way, in its boundaries' direction", self.lines.at(lid))
             lane["left_bound"], lane["right_bound"] = left, right
             out.append(lane)
@@ -218,7 +219,7 @@ class _Importer:
             sid = sign.traffic_sign_id
             on = users.get(sid, [])
             if not on:
-                self.note(YML442, f"traffic sign {sid} is referenced by no lanelet: it applies nowhere", self.lines.at(sid))
+                self.note(IMP710, f"traffic sign {sid} is referenced by no lanelet: it applies nowhere", self.lines.at(sid))
                 continue
             for el in sign.traffic_sign_elements:
                 name = el.traffic_sign_element_id.name
@@ -229,7 +230,7 @@ class _Importer:
                     except ValueError:
                         value = float("nan")
                     if not 0 < value <= 100:
-                        self.note(YML442, f"traffic sign {sid}: speed limit {el.additional_values[0]!r} is not a speed "
+                        self.note(IMP710, f"traffic sign {sid}: speed limit {el.additional_values[0]!r} is not a speed "
                                   "in m/s between 0 and 100", self.lines.at(sid))
                         continue
                     for ll in on:
@@ -244,7 +245,7 @@ class _Importer:
                     m["no_overtaking"] += [{"lane": lane_id(ll.lanelet_id), "s_range": [0.0, lengths[ll.lanelet_id]]}
                                            for ll in on]
                 else:
-                    self.note(YML442, f"traffic sign {sid}: {name} ({code}) has no equivalent on free-form lanes",
+                    self.note(IMP710, f"traffic sign {sid}: {name} ({code}) has no equivalent on free-form lanes",
                               self.lines.at(sid), hint="speed limits (MAX_SPEED), STOP and NO_OVERTAKING_START convert; "
                               "right of way comes from junction descriptions in twolevel")
         return stopped
@@ -260,16 +261,16 @@ class _Importer:
             span = self.lines.at(tid)
             on = users.get(tid, [])
             if not on:
-                self.note(YML442, f"traffic light {tid} is referenced by no lanelet: it controls nothing", span)
+                self.note(IMP710, f"traffic light {tid} is referenced by no lanelet: it controls nothing", span)
                 continue
             if not light.active:
-                self.note(YML442, f"traffic light {tid} is inactive: left out", span)
+                self.note(IMP710, f"traffic light {tid} is inactive: left out", span)
                 continue
             program = self.program(light, sc.dt, duration, span)
             if program is None:
                 continue
             if light.direction is not None and light.direction.value != "all":
-                self.note(YML443, f"traffic light {tid} controls only the direction '{light.direction.value}': "
+                self.note(IMP714, f"traffic light {tid} controls only the direction '{light.direction.value}': "
                           "imported for every direction of its lanelets", span)
             for ll in on:
                 lid = lane_id(ll.lanelet_id)
@@ -282,15 +283,15 @@ class _Importer:
         """A light's program: ``{cycle: …}`` when its cycle is green, yellow, red (red-yellow as red), else ``{script: …}``."""
         cyc = light.traffic_light_cycle
         if cyc is None or not cyc.cycle_elements:
-            self.note(YML442, f"traffic light {light.traffic_light_id} has no cycle: left out", span)
+            self.note(IMP710, f"traffic light {light.traffic_light_id} has no cycle: left out", span)
             return None
         states = [e.state.value for e in cyc.cycle_elements]
         durs = [int(e.duration) for e in cyc.cycle_elements]
         if "inactive" in states:
-            self.note(YML443, f"traffic light {light.traffic_light_id}: its inactive phases are imported as green", span)
+            self.note(IMP714, f"traffic light {light.traffic_light_id}: its inactive phases are imported as green", span)
         shown = ["red" if s == "redYellow" else "green" if s == "inactive" else s for s in states]
         if "redYellow" in states:
-            self.note(YML443, f"traffic light {light.traffic_light_id}: red-yellow is imported as red "
+            self.note(IMP714, f"traffic light {light.traffic_light_id}: red-yellow is imported as red "
                       "(no vehicle may go before green)", span)
         period = sum(durs)
         offset = int(cyc.time_offset or 0)
@@ -337,11 +338,11 @@ class _Importer:
             lo, hi = pts.min(0), pts.max(0)
             length, width = float(hi[0] - lo[0]), float(hi[1] - lo[1])
             off = (float(0.5 * (hi[0] + lo[0])), float(0.5 * (hi[1] + lo[1])))
-            self.note(YML443, f"obstacle {oid}: its {kind.lower()} shape is imported as its bounding box "
+            self.note(IMP714, f"obstacle {oid}: its {kind.lower()} shape is imported as its bounding box "
                       f"{length:.2f} m × {width:.2f} m", self.lines.at(oid))
         clipped = (min(max(length, MIN_BOX), MAX_LENGTH), min(max(width, MIN_BOX), MAX_WIDTH))
         if clipped != (length, width) and (length > MAX_LENGTH or width > MAX_WIDTH):
-            self.note(YML443, f"obstacle {oid}: its {length:.2f} m × {width:.2f} m are beyond a participant's box "
+            self.note(IMP714, f"obstacle {oid}: its {length:.2f} m × {width:.2f} m are beyond a participant's box "
                       f"(at most {MAX_LENGTH:g} m × {MAX_WIDTH:g} m): clipped", self.lines.at(oid))
         return {"length": clipped[0], "width": clipped[1]}, off
 
@@ -353,7 +354,7 @@ class _Importer:
             oid, typ = ob.obstacle_id, ob.obstacle_type.value
             span = self.lines.at(oid)
             if typ in NOT_PARTICIPANTS:
-                self.note(YML442, f"obstacle {oid} ({typ}) is part of the road's edge, not traffic: left out "
+                self.note(IMP710, f"obstacle {oid} ({typ}) is part of the road's edge, not traffic: left out "
                           "(the lanes bound the road)", span)
                 continue
             box, off = self.box(ob.obstacle_shape, oid)
@@ -372,7 +373,7 @@ class _Importer:
                 part["behaviour"] = "constant_velocity"
                 part["start"] = {"x": float(pos[0]), "y": float(pos[1]), "heading": math.degrees(psi)}
                 part["speed"] = abs(v0)
-                self.note(YML443, f"obstacle {oid} has no trajectory (its prediction is "
+                self.note(IMP714, f"obstacle {oid} has no trajectory (its prediction is "
                           f"{type(getattr(ob, 'prediction', None)).__name__}): it keeps its initial velocity", span)
             else:
                 states = [s0] + list(traj.state_list)
@@ -391,16 +392,16 @@ class _Importer:
                     part["behaviour"] = "scripted"
                     part["waypoints"] = wps
                     if wps[0]["t"] > 0:
-                        self.note(YML443, f"obstacle {oid} appears at {wps[0]['t']:g} s: it stands at its first "
+                        self.note(IMP714, f"obstacle {oid} appears at {wps[0]['t']:g} s: it stands at its first "
                                   "position until then", span)
                     if wps[-1]["t"] < duration - 1e-9:
-                        self.note(YML443, f"obstacle {oid}'s trajectory ends at {wps[-1]['t']:g} s: it stands at its "
+                        self.note(IMP714, f"obstacle {oid}'s trajectory ends at {wps[-1]['t']:g} s: it stands at its "
                                   f"last position until the run's end ({duration:g} s)", span)
             part["box"] = box
             out.append(part)
         for what in ("environment_obstacle", "phantom_obstacle"):
             for ob in getattr(sc, what, None) or []:
-                self.note(YML442, f"{what.replace('_', ' ')} {ob.obstacle_id}: left out (no equivalent)",
+                self.note(IMP710, f"{what.replace('_', ' ')} {ob.obstacle_id}: left out (no equivalent)",
                           self.lines.at(ob.obstacle_id))
         return out
 
@@ -449,7 +450,7 @@ class _Importer:
 
         problems = sorted(pps.planning_problem_dict.values(), key=lambda p: p.planning_problem_id)
         if not problems:
-            self.note(YML442, "the file has no planning problem: the ego starts on the first lanelet, "
+            self.note(IMP710, "the file has no planning problem: the ego starts on the first lanelet, "
                       "its goal at the end of the lanes ahead", self.lines.at(tag="commonRoad"))
             first = min(centres)
             c = centres[first]
@@ -459,7 +460,7 @@ class _Importer:
         else:
             pp = problems[0]
             for other in problems[1:]:
-                self.note(YML442, f"planning problem {other.planning_problem_id}: only the first "
+                self.note(IMP710, f"planning problem {other.planning_problem_id}: only the first "
                           f"({pp.planning_problem_id}) is imported (a scenario has one ego)",
                           self.lines.at(other.planning_problem_id))
             s0 = pp.initial_state
@@ -469,12 +470,12 @@ class _Importer:
                                "speed": max(float(getattr(s0, "velocity", 0.0) or 0.0), 0.0)}
             start_lid, start_s, dist = self.on_lanelet(sc, centres, pos, psi)
             if dist > 0.5 * 3.5 + 1.0:
-                self.note(YML443, f"planning problem {pp.planning_problem_id}: the initial position is {dist:.1f} m "
+                self.note(IMP714, f"planning problem {pp.planning_problem_id}: the initial position is {dist:.1f} m "
                           f"off every lanelet: the route starts on the nearest, {start_lid}",
                           self.lines.at(pp.planning_problem_id))
             goal_states = list(pp.goal.state_list)
             for k in range(1, len(goal_states)):
-                self.note(YML442, f"planning problem {pp.planning_problem_id}: goal state {k + 1} of "
+                self.note(IMP710, f"planning problem {pp.planning_problem_id}: goal state {k + 1} of "
                           f"{len(goal_states)} (an alternative) is not imported: the first is",
                           self.lines.at(pp.planning_problem_id))
             goal_state = goal_states[0] if goal_states else None
@@ -490,12 +491,12 @@ class _Importer:
         elif position is not None:
             shapes = list(position.shapes) if type(position).__name__ == "ShapeGroup" else [position]
             if len(shapes) > 1:
-                self.note(YML443, f"the goal region is {len(shapes)} shapes: imported as the first", span)
+                self.note(IMP714, f"the goal region is {len(shapes)} shapes: imported as the first", span)
             centre = np.asarray(shapes[0].center, float)
             lid, s, dist = self.on_lanelet(sc, {k: centres[k] for k in reach} if reach else centres, centre, None)
             goal_lid, goal_s = lid, s
             if dist > 2.0:
-                self.note(YML443, f"the goal region's centre is {dist:.1f} m from lanelet {lid}, the nearest the "
+                self.note(IMP714, f"the goal region's centre is {dist:.1f} m from lanelet {lid}, the nearest the "
                           "ego can reach: the goal is its nearest point on it", span)
         else:
             lid, seen = start_lid, {start_lid}
@@ -507,12 +508,12 @@ class _Importer:
                 seen.add(lid)
             goal_lid, goal_s = lid, max(lengths[lid] - 1.0, 0.5 * lengths[lid])
             if pp is not None:
-                self.note(YML443, "the goal has no position: the route follows the lanes straight ahead to the end of "
+                self.note(IMP714, "the goal has no position: the route follows the lanes straight ahead to the end of "
                           f"lanelet {lid}", span)
         if goal_lid == start_lid and goal_s is not None and goal_s <= start_s + 1.0:
             goal_s = lengths[goal_lid]
         if goal_lid not in reach:
-            self.note(YML443, f"the goal's lanelet {goal_lid} is not reachable by successors from the start's "
+            self.note(IMP714, f"the goal's lanelet {goal_lid} is not reachable by successors from the start's "
                       f"{start_lid}", span)
         scenario["route"] = {"start": {"lane": lane_id(start_lid), "s": start_s},
                              "goal": {"lane": lane_id(goal_lid), "s": min(goal_s, lengths[goal_lid])},
@@ -535,13 +536,13 @@ class _Importer:
                 lo_v, hi_v = (v.start, v.end) if hasattr(v, "start") else (v, v)
                 if lo_v is not None and lo_v > STOP_SPEED:
                     scenario["route"]["stop_at_goal"] = False
-                    self.note(YML442, f"the goal's speed window [{lo_v:g}, {hi_v:g}] m/s is not judged; the ego passes "
+                    self.note(IMP710, f"the goal's speed window [{lo_v:g}, {hi_v:g}] m/s is not judged; the ego passes "
                               "the goal without stopping (and has no route beyond it)", span)
                 elif hi_v is None or hi_v > STOP_SPEED:
-                    self.note(YML442, f"the goal's speed window [{lo_v:g}, {hi_v:g}] m/s is not judged", span)
+                    self.note(IMP710, f"the goal's speed window [{lo_v:g}, {hi_v:g}] m/s is not judged", span)
             if getattr(goal_state, "orientation", None) is not None:
                 o = goal_state.orientation
-                self.note(YML442, f"the goal's heading window [{math.degrees(o.start):.0f}, {math.degrees(o.end):.0f}] deg "
+                self.note(IMP710, f"the goal's heading window [{math.degrees(o.start):.0f}, {math.degrees(o.end):.0f}] deg "
                           "is not judged", span)
         return deadline
 
@@ -557,7 +558,7 @@ class _Importer:
         m: dict[str, Any] = {"kind": "map", "name": str(sc.scenario_id), "stop_signs": [], "traffic_lights": [],
                              "no_overtaking": []}
         if not sc.lanelet_network.lanelets:
-            raise _Unreadable("the scenario has no lanelet: nothing to drive on")
+            raise _Unreadable("the scenario has no lanelet: nothing to drive on", IMP706)
         lanes, centres, lengths = self.lanes(sc)
         scenario: dict[str, Any] = {"kind": "scenario", "name": str(sc.scenario_id), "map": MAP_FILE}
         deadline = self.ego(sc, pps, centres, lengths, scenario)
@@ -569,7 +570,7 @@ class _Importer:
         lit = self.lights(sc, centres, lengths, duration, m)
         for ll in sc.lanelet_network.lanelets:
             if ll.stop_line is not None and ll.lanelet_id not in stopped | lit:
-                self.note(YML442, f"lanelet {ll.lanelet_id}'s stop line belongs to no stop sign or light: it obliges "
+                self.note(IMP710, f"lanelet {ll.lanelet_id}'s stop line belongs to no stop sign or light: it obliges "
                           "nobody to stop", self.lines.at(ll.lanelet_id))
         for lane in lanes:
             if "speed_limit" not in lane:
@@ -577,7 +578,7 @@ class _Importer:
                 if limits:
                     lane["speed_limit"] = min(limits)
         for inter in sc.lanelet_network.intersections:
-            self.note(YML442, f"intersection {inter.intersection_id}: its turns are the lanelets' successors; who "
+            self.note(IMP710, f"intersection {inter.intersection_id}: its turns are the lanelets' successors; who "
                       "yields to whom is not imported (stop signs and lights are)", self.lines.at(inter.intersection_id))
         m = {"kind": "map", "name": m["name"],
              "lanes": [{k: v for k, v in lane.items() if not k.endswith("_bound")}
@@ -591,7 +592,7 @@ class _Importer:
         if 0.01 <= dt <= 1.0:
             scenario["controller"] = {"dt": dt}
         else:
-            self.note(YML442, f"the scenario's time step {dt:g} s is outside twolevel's 0.01–1 s: the controller "
+            self.note(IMP710, f"the scenario's time step {dt:g} s is outside twolevel's 0.01–1 s: the controller "
                       "runs at 0.1 s", self.lines.at(tag="commonRoad"))
         scenario["run"] = {"duration": duration}
         if "expect" in scenario:
@@ -600,30 +601,54 @@ class _Importer:
 
 
 class _Unreadable(Exception):
-    pass
+    """The file cannot be used: ``code`` says why (IMP703 commonroad-io cannot read it, IMP706 it
+    has nothing to convert)."""
+
+    def __init__(self, message: str, code: Any = IMP703) -> None:
+        super().__init__(message)
+        self.code = code
 
 
 def import_commonroad(path: str | os.PathLike[str], *, rules: Sequence[str] = (),
                       out_dir: str | os.PathLike[str] | None = None) -> tuple[Imported | None, list[Diagnostic]]:
     """Convert the CommonRoad scenario at ``path``: ``(Imported, findings)``, or ``(None,
-    findings)`` when it cannot be read (YML440 without commonroad-io, YML441 a file it cannot
-    read). ``rules``: rule files the scenario lists, written relative to ``out_dir``."""
+    findings)`` when it cannot be read (IMP704 without commonroad-io, IMP701–IMP703 and IMP706 a file it
+    cannot read or use). ``rules``: rule files the scenario lists, written relative to ``out_dir``."""
     path = str(path)
     try:
         import commonroad  # noqa: F401
         import lxml  # noqa: F401
     except ImportError:
-        return None, [YML440("reading CommonRoad scenarios needs commonroad-io", Span.whole_file(path),
+        return None, [IMP704("reading CommonRoad scenarios needs commonroad-io", Span.whole_file(path),
                              hint="pip install 'twolevel[commonroad]'")]
     if not Path(path).is_file():
-        return None, [YML441(f"no such file: '{path}'", Span.whole_file(path))]
+        return None, [IMP701(f"no such file: '{path}'", Span.whole_file(path))]
     try:
         importer = _Importer(path, rules, None if out_dir is None else str(out_dir))
     except Exception as exc:  # lxml's XMLSyntaxError carries the line
         line = getattr(exc, "lineno", None) or getattr(getattr(exc, "position", None), "__getitem__", lambda i: 1)(0)
-        return None, [YML441(f"not well-formed XML: {exc}", Span(path, int(line or 1), 1))]
+        return None, [IMP702(f"not well-formed XML: {exc}", Span(path, int(line or 1), 1))]
     try:
         result = importer.run()
     except _Unreadable as exc:
-        return None, importer.diags + [YML441(str(exc), Span.whole_file(path))]
+        return None, importer.diags + [exc.code(str(exc), Span.whole_file(path))]
     return result, list(result.diagnostics)
+
+
+def import_file(path: str | os.PathLike[str], out_dir: str | os.PathLike[str], rules: Sequence[str] = ()) -> ImportResult:
+    """Convert the CommonRoad scenario at ``path`` into ``out_dir/map.yaml`` and
+    ``out_dir/scenario.yaml``, listing ``rules`` (paths of rule files), and check what was written:
+    the importer's findings, then the checks' (at the written files' lines)."""
+    from twolevel.world.lint import lint_world_file
+    from twolevel.world.loader import check_world_file
+
+    imported, diags = import_commonroad(path, rules=rules, out_dir=out_dir)
+    if imported is None:
+        return ImportResult((), tuple(diags))
+    written = tuple(write_imported(imported, out_dir))
+    scenario = Path(out_dir) / SCENARIO_FILE
+    found = check_world_file(scenario) + lint_world_file(scenario)
+    m = imported.map
+    summary = (f"{len(m.get('lanes', []))} lanes, {len(imported.scenario.get('participants', []))} participants, "
+               f"{len(m.get('traffic_lights', []))} lights")
+    return ImportResult(written, tuple(diags + found), m, summary)

@@ -16,7 +16,7 @@ Writes into the output folder:
 The scenario id is the run's scenario name when it is a CommonRoad benchmark id (an imported
 scenario keeps its own), else ``ZAM_<name>-1_1_T-1``. What the format cannot hold (participants
 whose motion depends on the ego: IDM and constant-velocity ones are exported standing at their
-start) is listed (``YML444``). Units: m, s, rad, m/s.
+start) is listed (``IMP730``). Units: m, s, rad, m/s.
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from twolevel.diagnostics import Diagnostic, Span
-from twolevel.interop.codes import YML440, YML444
+from twolevel.interop.codes import IMP704, IMP730
 from twolevel.world.codes import YML401
 
 __all__ = ["export_commonroad", "scenario_id_of"]
@@ -167,7 +167,7 @@ def _signs_and_lights(world: Any, net: Any, lid_of: dict[int, int], ids: _Ids, d
         steps = np.maximum(np.round((ends - times) / dt).astype(int), 0)
         elements = [TrafficLightCycleElement(names[int(st)], int(d)) for st, d in zip(states, steps) if d > 0]
         if not np.isfinite(L.period[k]):
-            diags.append(YML444(f"light {L.ids[k]}'s script is exported as one cycle of {period:g} s", span))
+            diags.append(IMP730(f"light {L.ids[k]}'s script is exported as one cycle of {period:g} s", span))
         offset = int(round((-float(L.offset[k]) % period) / dt)) if np.isfinite(L.period[k]) else 0
         tid = ids.fresh()
         pos = np.asarray(lanes.lanes[lane].position(s), float).ravel()
@@ -215,7 +215,7 @@ def _obstacles(world: Any, spec_parts: list[Any], ids: _Ids, diags: list[Diagnos
                                        TrajectoryPrediction(Trajectory(1, states), shape)))
             continue
         if how != "stationary":
-            diags.append(YML444(f"participant {pid} ({how}) reacts to the ego: exported standing at its start", span))
+            diags.append(IMP730(f"participant {pid} ({how}) reacts to the ego: exported standing at its start", span))
         if kind in ("pedestrian", "bicycle"):  # the format's static obstacles are vehicles, zones and boundaries
             states = [PMState(time_step=k, position=init.position, velocity=0.0, velocity_y=0.0) for k in range(1, steps + 1)]
             out.append(DynamicObstacle(oid, ObstacleType[_OBSTACLES[kind]], shape, init,
@@ -266,7 +266,7 @@ def export_commonroad(run_dir: str | os.PathLike[str], out_dir: str | os.PathLik
     try:
         import commonroad  # noqa: F401
     except ImportError:
-        return [], [YML440("writing CommonRoad files needs commonroad-io", span, hint="pip install 'twolevel[commonroad]'")]
+        return [], [IMP704("writing CommonRoad files needs commonroad-io", span, hint="pip install 'twolevel[commonroad]'")]
     import numpy as np
     from commonroad.common.file_writer import CommonRoadFileWriter, OverwriteExistingFile
     from commonroad.common.solution import (CommonRoadSolutionWriter, CostFunction, PlanningProblemSolution, Solution,

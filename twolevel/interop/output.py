@@ -1,5 +1,6 @@
-"""How an importer writes what it converted: a map and a scenario as readable YAML files that
-``twolevel check`` accepts (the same schema as hand-written ones), written atomically.
+"""How an importer writes what it converted: a map (and a scenario, when the format has one) as
+readable YAML files that ``twolevel check`` accepts (the same schema as hand-written ones), written
+atomically; :func:`to_yaml` is the one YAML writer of every format (OpenDRIVE, CommonRoad).
 
 Points ``[x, y]`` and other short lists of numbers stay on one line; numbers are rounded to
 millimetres (``DIGITS``); the files start with a comment naming the source and the findings.

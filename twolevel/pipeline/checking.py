@@ -16,7 +16,6 @@ from twolevel.diagnostics import Diagnostic, Severity, Span
 from twolevel.files import read_text_quietly
 from twolevel.interop import FORMATS, format_of
 from twolevel.pipeline.codes import CLI001, CLI002, CLI003
-from twolevel.pipeline.conversion import FOREIGN_SUFFIXES, foreign_format
 
 RULE_SUFFIXES = (".stl",)
 YAML_SUFFIXES = (".yaml", ".yml")
@@ -54,13 +53,11 @@ def collect_paths(paths: Sequence[str]) -> tuple[list[str], list[Diagnostic]]:
                 diags.append(CLI003(f"no .stl, .yaml or .yml file below '{raw}'", Span.whole_file(raw)))
             files.extend(found)
         elif p.exists():
-            if raw.endswith(FOREIGN_SUFFIXES) and foreign_format(raw) is not None:
-                files.append(raw)
-            elif not raw.endswith(RULE_SUFFIXES + YAML_SUFFIXES) and format_of(raw) is None:
+            if not raw.endswith(RULE_SUFFIXES + YAML_SUFFIXES) and format_of(raw) is None:
                 diags.append(
                     CLI002(
                         f"'{raw}' is not a rule file (.stl), a map/scenario (.yaml, .yml) or a file to import "
-                        f"({', '.join(FORMATS)}, CommonRoad .xml)",
+                        f"({', '.join(f'{f.name} {f.suffix}' for f in FORMATS)})",
                         Span.whole_file(raw),
                         hint="pass rule files, maps, scenarios, other tools' maps and scenarios or folders holding them",
                     )
@@ -77,7 +74,7 @@ def collect_paths(paths: Sequence[str]) -> tuple[list[str], list[Diagnostic]]:
 
 def check(paths: Sequence[str], *, dt: float | None = None, horizon: int | None = None) -> CheckResult:
     """Check rule files, maps and scenarios (and, for a scenario, its map and rule files with
-    the signals its world provides), and CommonRoad scenarios through the importer (folders:
+    the signals its world provides), and other tools' maps and scenarios through their importer (folders:
     only ``.stl`` and ``.yaml`` files below them). Nothing is solved or simulated.
 
     ``dt`` [s] enables the multiple-of-dt check on intervals; with ``horizon`` [steps] too,
@@ -94,12 +91,9 @@ def check(paths: Sequence[str], *, dt: float | None = None, horizon: int | None 
             diags.extend(result.diagnostics)
             if result.source is not None:
                 sources[file] = result.source
-        elif file.endswith(FOREIGN_SUFFIXES):
-            from twolevel.pipeline.conversion import check_foreign
-
-            diags.extend(check_foreign(file))
-            sources.setdefault(file, read_text_quietly(file))
         elif format_of(file) is not None:
+            from twolevel.pipeline.conversion import check_import
+
             diags.extend(check_import(file))
             sources.setdefault(file, read_text_quietly(file))
         else:
@@ -110,24 +104,6 @@ def check(paths: Sequence[str], *, dt: float | None = None, horizon: int | None 
             diags.extend(lint_world_file(file))
             sources.setdefault(file, read_text_quietly(file))
     return CheckResult(tuple(dedupe(diags)), len(files), sources)
-
-
-def check_import(file: str) -> list[Diagnostic]:
-    """A map of another tool checked through its importer: what the import reports, and what the
-    map checks find in the converted map (at the source file: the converted one is temporary)."""
-    import tempfile
-
-    from twolevel.interop import import_map
-
-    with tempfile.TemporaryDirectory(prefix="twolevel-check-") as tmp:
-        result = import_map(file, tmp)
-        out = []
-        for d in result.diagnostics:
-            if d.span.file.startswith(tmp):
-                d = Diagnostic(d.code, d.severity, f"in the converted map (line {d.span.line}): {d.message}",
-                               Span.whole_file(file), d.hint)
-            out.append(d)
-    return out
 
 
 def dedupe(diags: Iterable[Diagnostic]) -> list[Diagnostic]:
