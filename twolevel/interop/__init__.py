@@ -23,7 +23,7 @@ from typing import Any
 
 from twolevel.diagnostics import Diagnostic
 
-__all__ = ["Format", "FORMATS", "SUFFIXES", "ImportResult", "format_of", "import_file"]
+__all__ = ["Format", "FORMATS", "ImportResult", "format_of", "import_file"]
 
 _SNIFF = 4096
 """Bytes read from a file's start to find a format's marker."""
@@ -46,10 +46,6 @@ FORMATS: tuple[Format, ...] = (
 )
 """Every importer, tried in order: a longer suffix (``.net.xml``) goes before a shorter one it ends
 in (``.xml``), so that the first row matching a file is the most specific."""
-
-SUFFIXES: tuple[str, ...] = tuple(dict.fromkeys(f.suffix for f in FORMATS))
-"""The suffixes of :data:`FORMATS`, each once (what ``check`` and ``import`` say they accept)."""
-
 
 @dataclass(frozen=True)
 class ImportResult:
