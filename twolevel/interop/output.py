@@ -68,7 +68,10 @@ def _scalar(value: Any) -> str:
     if isinstance(value, float):
         if math.isnan(value):
             return ".nan"
-        return repr(value) if math.isfinite(value) else (".inf" if value > 0 else "-.inf")
+        if not math.isfinite(value):
+            return ".inf" if value > 0 else "-.inf"
+        text = repr(value)
+        return text.replace("e", ".0e", 1) if "e" in text and "." not in text else text  # YAML 1.1: 1.0e+300
     text = str(value)
     if _PLAIN.match(text) and text.lower() not in _WORDS:
         return text
