@@ -5,7 +5,7 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 # The extras installed: a lock requirements/<extras>.lock per set, extras joined by '+'.
-EXTRAS ?= dev
+EXTRAS ?= dev+crime
 LOCK   := requirements/$(EXTRAS).lock
 STAMP  := $(VENV)/.installed-$(EXTRAS)
 COMPILE = $(BIN)/uv pip compile --quiet --universal --python-version 3.11 --generate-hashes \
