@@ -94,11 +94,6 @@ class Junctions:
         return cls((), i, i, f, np.zeros((0, 2)), i, i, i, i, i, i, i, i, i, f, i, i, i, i, i,
                    np.zeros((0, 2), dtype=int), np.zeros((0, 2)), np.zeros((0, 2)), i, i)
 
-    def conflicts_of(self, lane: int) -> tuple[np.ndarray, np.ndarray]:
-        """The conflicts lane ``lane`` takes part in and its side in each (0 or 1)."""
-        x, side = np.nonzero(self.conflict_lane == lane)
-        return x, side
-
 
 def _samples(lanes: LaneSet, conn: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Each connecting lane sampled every SAMPLE m or less, one after another: points (S, 2) [m],
