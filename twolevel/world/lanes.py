@@ -167,8 +167,7 @@ def _symmetric(lanes: Sequence[Lane], adj: dict[bool, np.ndarray]) -> None:
 
 def _marking_rows(spec: MapFile, index: dict[str, int], lengths: np.ndarray) -> list[MarkingRow]:
     rows: list[MarkingRow] = []
-    declared = [ln for road in spec.roads for ln in road.lane_specs()] + list(spec.lanes)
-    for ln in declared:
+    for ln in spec.lane_specs():
         for left, kind in ((True, ln.left_marking), (False, ln.right_marking)):
             if kind is not None:
                 rows.append((index[ln.id], left, 0.0, float(lengths[index[ln.id]]), MARKINGS.index(kind)))
@@ -184,7 +183,7 @@ def build_lanes(spec: MapFile, plans: list[Plan] | None = None) -> tuple[LaneSet
     plans (:func:`~twolevel.world.junction.plan_junctions`, unless given)."""
     plans = plan_junctions(spec) if plans is None else plans
     conns = [c for plan in plans for c in plan.connections]
-    ids = [ln.id for road in spec.roads for ln in road.lane_specs()] + [ln.id for ln in spec.lanes] + [c.id for c in conns]
+    ids = [ln.id for ln in spec.lane_specs()] + [c.id for c in conns]
     index = {lid: i for i, lid in enumerate(ids)}
     succ = successors(spec)
     lanes: list[Lane] = []
@@ -213,8 +212,7 @@ def build_lanes(spec: MapFile, plans: list[Plan] | None = None) -> tuple[LaneSet
     if len(free):
         _shared(lanes[: L - len(conns)], free, adj)
     _symmetric(lanes, adj)
-    usable = [ln.usable if ln.usable is not None else ln.type == "driving"
-              for ln in [x for road in spec.roads for x in road.lane_specs()] + list(spec.lanes)] + [True] * len(conns)
+    usable = [ln.usable if ln.usable is not None else ln.type == "driving" for ln in spec.lane_specs()] + [True] * len(conns)
     junction = [-1] * (L - len(conns)) + [plan.index for plan in plans for _ in plan.connections]
     lengths = np.array([ln.length for ln in lanes])
     zones = [(index[z.lane], float(z.s_range[0]), float(z.s_range[1])) for z in spec.no_overtaking]

@@ -100,8 +100,7 @@ def fastest(scn: "Scenario", lanes: list[str]) -> tuple[float, str]:
     highest limit on them (their own or the map's default, and the signs on them), capped by the
     ego's desired speed, and at least its speed at the start; and what set it, in words."""
     spec, m = scn.spec, scn.map.spec
-    own = {ln.id: ln.speed_limit for road in m.roads for ln in road.lane_specs()}
-    own.update({ln.id: ln.speed_limit for ln in m.lanes})
+    own = {ln.id: ln.speed_limit for ln in m.lane_specs()}
     limits = [own.get(lane) or m.default_speed_limit for lane in lanes]
     limits += [sign.value for sign in m.speed_limits if sign.lane in lanes]
     top = max(limits)

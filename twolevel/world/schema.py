@@ -360,6 +360,10 @@ class MapFile(_Model):
             raise ValueError("a map needs 'roads' or free-form 'lanes' (at least one)")
         return self
 
+    def lane_specs(self) -> list[LaneSpec | FreeLane]:
+        """Every declared lane: each road's (:meth:`Road.lane_specs`), then the free-form ones."""
+        return [ln for road in self.roads for ln in road.lane_specs()] + list(self.lanes)
+
 
 # ------------------------------------------------------------------------------ scenarios
 

@@ -121,8 +121,7 @@ class World:
 def _limits(spec: MapFile, lanes: LaneSet, index: dict[str, int], plans: list[Plan]) -> SpeedLimits:
     """Limits by (lane, s): each lane's own from its start (a junction's connecting lanes: the
     junction's, else the one in force where the incoming lane ends), then the signs."""
-    lane_start = {ln.id: ln.speed_limit for road in spec.roads for ln in road.lane_specs()}
-    lane_start.update({ln.id: ln.speed_limit for ln in spec.lanes})
+    lane_start = {ln.id: ln.speed_limit for ln in spec.lane_specs()}
     conns = {c.id: (spec.junctions[plan.index].speed_limit, c.incoming) for plan in plans for c in plan.connections}
 
     def table(names: list[str], start: dict[str, float]) -> SpeedLimits:
