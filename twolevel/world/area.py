@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from twolevel.world.geometry import LaneSet, Route
+from twolevel.world.geometry import LaneSet, Route, step_index
 
 __all__ = ["Area", "drivable_area", "route_lanes_at"]
 
@@ -56,7 +56,7 @@ def route_lanes_at(route: Route, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     """The lane (N,) the route runs along at route positions ``s`` (N,) [m], and s on it [m]."""
     s = np.asarray(s, dtype=float)
     pieces = np.array([p[:4] for p in route.pieces], dtype=float).reshape(-1, 4)
-    k = np.clip(np.searchsorted(pieces[:, 3], s, side="right") - 1, 0, len(pieces) - 1)
+    k = step_index(pieces[:, 3], s)
     return pieces[k, 0].astype(int), pieces[k, 1] + s - pieces[k, 3]
 
 

@@ -22,7 +22,7 @@ from twolevel.world.schema import Road
 
 __all__ = [
     "Polyline", "Lane", "LaneSet", "Markings", "Zones", "Route", "sample_road", "lane_from_reference", "concatenate",
-    "resample", "LANE_KINDS", "MARKINGS", "CROSSABLE", "MIRRORED", "MarkingRow",
+    "resample", "step_index", "LANE_KINDS", "MARKINGS", "CROSSABLE", "MIRRORED", "MarkingRow",
 ]
 
 _SAGITTA = 1e-3  # [m] maximum distance of an arc from its chords
@@ -251,6 +251,12 @@ def concatenate(pieces: list[tuple[Polyline, float, float]]) -> Polyline:
     return Polyline(np.concatenate(pts), np.concatenate(ss), np.concatenate(hs), np.concatenate(ks))
 
 
+def step_index(key: np.ndarray, q: np.ndarray | float) -> np.ndarray:
+    """Which piece of a piecewise-constant table with sorted breakpoints ``key`` is in force at
+    ``q``: the last breakpoint at or before it (the first one before them all); broadcast over ``q``."""
+    return np.clip(np.searchsorted(key, q, side="right") - 1, 0, len(key) - 1)
+
+
 @dataclass(frozen=True, eq=False)
 class Markings:
     """The line markings of every lane's two boundaries, piecewise constant along the lane: per side,
@@ -269,9 +275,7 @@ class Markings:
         boundary at arc length ``s`` [m]; broadcast over the arguments."""
         lane, s, left = np.broadcast_arrays(np.asarray(lane, dtype=int), np.asarray(s, dtype=float), np.asarray(left, dtype=bool))
         q = self.base[lane] + s
-        jl = np.clip(np.searchsorted(self.left_key, q, side="right") - 1, 0, len(self.left_key) - 1)
-        jr = np.clip(np.searchsorted(self.right_key, q, side="right") - 1, 0, len(self.right_key) - 1)
-        return np.where(left, self.left_type[jl], self.right_type[jr])
+        return np.where(left, self.left_type[step_index(self.left_key, q)], self.right_type[step_index(self.right_key, q)])
 
     def crossable(self, lane: np.ndarray, s: np.ndarray, left: np.ndarray | bool) -> np.ndarray:
         """Whether traffic on ``lane`` at ``s`` [m] may cross its left (or right) boundary."""
@@ -634,8 +638,7 @@ class Route(Polyline):
 
     def limit_at(self, s: np.ndarray | float) -> np.ndarray:
         """Speed limit [m/s] in force at route position ``s`` [m]."""
-        j = np.clip(np.searchsorted(self.limit_s, np.asarray(s, dtype=float), side="right") - 1, 0, len(self.limit_s) - 1)
-        return self.limit_v[j]
+        return self.limit_v[step_index(self.limit_s, np.asarray(s, dtype=float))]
 
     def desired_speed_at(self, s: np.ndarray | float) -> np.ndarray:
         """Desired speed [m/s] at route position ``s`` [m] (linear between vertices)."""

@@ -18,7 +18,7 @@ import numpy as np
 
 from twolevel.world.assumptions import RSS_BOUNDS, Assumptions, ResponseBounds, from_spec
 from twolevel.world.conflicts import Junctions, build_junctions
-from twolevel.world.geometry import LaneSet, Route, concatenate, resample
+from twolevel.world.geometry import LaneSet, Route, concatenate, resample, step_index
 from twolevel.world.junction import Plan
 from twolevel.world.lanes import build_lanes
 from twolevel.world.loader import Scenario, _route_lanes, sensing_of, successors
@@ -207,13 +207,12 @@ def _route(scn: Scenario, lanes: LaneSet, index: dict[str, int], limits: SpeedLi
     limit_s, limit_v = np.asarray(ls), np.asarray(lv)
     keep = np.append(np.diff(limit_s) > 0, True)  # a later breakpoint at the same s wins
     limit_s, limit_v = limit_s[keep], limit_v[keep]
-    j = np.clip(np.searchsorted(limit_s, s, side="right") - 1, 0, len(limit_s) - 1)
-    cap = limit_v[j].astype(float)
+    cap = limit_v[step_index(limit_s, s)].astype(float)
     if spec.ego.desired_speed is not None:
         cap = np.minimum(cap, spec.ego.desired_speed)
     v_des = speed_profile(s, np.minimum(cap, v_sense), kappa, comfort, 0.0 if spec.route.stop_at_goal else None)
     bounds = np.array([p[3] for p in pieces] + [start])
-    k = np.clip(np.searchsorted(bounds, s, side="right") - 1, 0, len(pieces) - 1)
+    k = np.minimum(step_index(bounds, s), len(pieces) - 1)
     piece = np.array([p[:3] for p in pieces])
     width = lanes.width_at(piece[k, 0].astype(int), piece[k, 1] + s - bounds[k])
     return Route(pts, s, np.unwrap(heading), kappa, spacing=float(s[1] - s[0]) if len(s) > 1 else spec.route.spacing,

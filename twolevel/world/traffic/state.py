@@ -13,6 +13,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from twolevel.world.assumptions import RSS_BOUNDS, ResponseBounds
+from twolevel.world.geometry import step_index
 
 __all__ = [
     "GREEN", "YELLOW", "RED", "STATIONARY", "CONSTANT_VELOCITY", "IDM", "SCRIPTED", "MANOEUVRES", "WALK", "BIG",
@@ -105,8 +106,7 @@ class SpeedLimits:
 
     def at(self, lane: np.ndarray, s: np.ndarray) -> np.ndarray:
         """Limit [m/s] in force at (lane index, s [m])."""
-        j = np.clip(np.searchsorted(self.key, self.base[lane] + s, side="right") - 1, 0, len(self.key) - 1)
-        return self.value[j]
+        return self.value[step_index(self.key, self.base[lane] + s)]
 
 
 @dataclass(frozen=True, eq=False)
