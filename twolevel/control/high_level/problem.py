@@ -345,6 +345,16 @@ class _CostShape:
     w: np.ndarray
     P: sp.csc_matrix
     FtW: sp.csr_matrix  # Fᵀ diag(w)
+    Ft: sp.csr_matrix  # Fᵀ: FtW's pattern, for other row weights
+    to_P: sp.csr_matrix  # (nnz P, rows of F): P.data = 2·(to_P @ row weights), for other row weights
+
+    def weighed(self, w_rows: np.ndarray) -> tuple[sp.csc_matrix, sp.csr_matrix]:
+        """P and Fᵀ diag(``w_rows``) for other positive row weights (same patterns as ``P`` and
+        ``FtW``), from whole arrays: no sparse product per step."""
+        P = sp.csc_matrix(((self.to_P @ w_rows) * 2.0, self.P.indices, self.P.indptr), shape=self.P.shape)
+        FtW = sp.csr_matrix((self.Ft.data * w_rows[self.Ft.indices], self.Ft.indices, self.Ft.indptr),
+                            shape=self.Ft.shape)
+        return P, FtW
 
 
 _COST_CACHE: dict[tuple, _CostShape] = {}
@@ -356,9 +366,9 @@ def _widen(cs: _CostShape, n: int) -> _CostShape:
     F = sp.csr_matrix((cs.F.data, cs.F.indices, cs.F.indptr), shape=(m, n))
     P = sp.csc_matrix((cs.P.data, cs.P.indices, np.concatenate([cs.P.indptr, np.full(n - n0, cs.P.indptr[-1])])),
                       shape=(n, n))
-    FtW = sp.csr_matrix((cs.FtW.data, cs.FtW.indices, np.concatenate([cs.FtW.indptr, np.full(n - n0, cs.FtW.indptr[-1])])),
-                        shape=(n, m))
-    return _CostShape(F, cs.w, P, FtW)
+    FtW, Ft = (sp.csr_matrix((a.data, a.indices, np.concatenate([a.indptr, np.full(n - n0, a.indptr[-1])])),
+                             shape=(n, m)) for a in (cs.FtW, cs.Ft))
+    return _CostShape(F, cs.w, P, FtW, Ft, cs.to_P)
 
 
 def _cost_shape(lay: Layout, w: Weights, n: int, span: tuple[float, ...]) -> _CostShape:
@@ -402,7 +412,12 @@ def _base_cost_shape(lay: Layout, w: Weights, n: int, span: np.ndarray) -> _Cost
     Hs = (F.T @ sp.diags(2.0 * wt) @ F).tocsc()
     P = sp.triu(Hs).tocsc()
     P.sum_duplicates()
-    return _CostShape(F, wt, P, (F.T @ sp.diags(wt)).tocsr())
+    Ft = F.T.tocsr()
+    Ft.sort_indices()
+    i = np.repeat(np.arange(n), np.diff(P.indptr))  # P's entries (row P.indices, column i)
+    to_P = Ft[P.indices].multiply(Ft[i]).tocsr()  # F_ri·F_rj for entry (i, j), over the rows r of F
+    to_P.sort_indices()
+    return _CostShape(F, wt, P, (F.T @ sp.diags(wt)).tocsr(), Ft, to_P)
 
 
 def others_of(step: StepData, P: int) -> np.ndarray:
@@ -429,9 +444,7 @@ def _cost(model: MilpModel, step: StepData, lay: Layout, w: Weights) -> None:
         scale = np.ones_like(cs.w)
         scale[0:nu:2] = scale[nu:2 * nu:2] = step.steer_weight
         w_rows = cs.w * scale
-        FtW = cs.F.T.multiply(w_rows).tocsr()
-        P = sp.triu(FtW @ cs.F * 2.0).tocsc()
-        P.sum_duplicates()
+        P, FtW = cs.weighed(w_rows)
     model.P = P
     model.q = model.q - 2.0 * (FtW @ g)
     model.c0 = model.c0 + float(w_rows @ (g * g))
