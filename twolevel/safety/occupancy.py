@@ -55,7 +55,7 @@ from twolevel.safety.polygons import OCTAGON_NORMALS, band_pieces, disc_hull_oct
 from twolevel.world.traffic import RED, TrafficState
 
 __all__ = ["Intervals", "Occupancy", "predict", "travel_max", "travel_min", "time_to_travel", "lane_of",
-           "STOP_ZONE", "STANDING"]
+           "kind_flags", "STOP_ZONE", "STANDING"]
 
 STOP_ZONE = 3.0
 """A user standing this close before a stop sign's line [m] may have served it (no cap)."""
@@ -272,6 +272,12 @@ def _bounds_table(a: Assumptions) -> np.ndarray:
     table = np.array([[float(getattr(a.bounds(k), c)) for c in _COLUMNS] for k in range(3)])
     _TABLES[:] = [(a, table)] + _TABLES[:3]
     return table
+
+
+def kind_flags(assumptions: Assumptions, kinds: np.ndarray, name: str) -> np.ndarray:
+    """A boolean bound (a column of :data:`_COLUMNS`: ``lane_bound``, ``lane_changes``,
+    ``stop_lines``, ``red_lights``) of each participant's kind of road user, ``kinds`` (N,)."""
+    return _bounds_table(assumptions)[np.asarray(kinds, dtype=int), _COLUMNS.index(name)] > 0
 
 
 def predict(net: Network, traffic: TrafficState, t: float, intervals: Intervals, assumptions: Assumptions,

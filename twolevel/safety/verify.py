@@ -61,7 +61,7 @@ from twolevel.models.params import VehicleParams
 from twolevel.models.rollout import Backend, rollout
 from twolevel.safety.failsafe import FailSafe, FailSafeSettings, brake_rate, manoeuvres, roll
 from twolevel.safety.network import Network, network_of
-from twolevel.safety.occupancy import Intervals, Occupancy, lane_of, predict
+from twolevel.safety.occupancy import Intervals, Occupancy, kind_flags, lane_of, predict
 from twolevel.world.traffic import TrafficState
 from twolevel.world.world import World
 
@@ -216,8 +216,7 @@ def _excluded(ctx: Context, traffic: TrafficState, s_ego: float, e_ego: float) -
     tr = ctx.network.keep
     # the simulator's lane, or the one the pose lies on (scripted participants); lane-bound users only
     lane, s_on = lane_of(ctx.network, traffic, np.arange(n))
-    bound = np.array([w.assumptions.bounds(int(k)).lane_bound for k in ctx.kinds], dtype=bool).reshape(n)
-    on = traffic.active & (lane >= 0) & bound
+    on = traffic.active & (lane >= 0) & kind_flags(w.assumptions, ctx.kinds, "lane_bound")
     follower = np.zeros(n, dtype=bool)
     idx = np.flatnonzero(on)
     if len(idx):
