@@ -50,11 +50,16 @@ from twolevel.models.actuation import gamma_from_accel
 from twolevel.models.ops import casadi_ops
 from twolevel.models.params import BicycleParams, VehicleParams
 
-__all__ = ["MODELS", "ParamLayout", "NlpSolution", "NmpcProblem", "bicycle_step_casadi"]
+__all__ = ["MODELS", "LADDER", "ParamLayout", "NlpSolution", "NmpcProblem", "bicycle_step_casadi"]
 
 MODELS = ("kinematic", "fourwheel")
 _EPS_SUPER = 1e-8  # keeps the ¼ power smooth at the obstacle's centre
 SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+
+LADDER: tuple[tuple[bool, bool], ...] = ((False, False), (True, True), (False, True))
+"""The IPOPT attempts of one solve, each from the same point until one succeeds (the later ones
+only with ``retry``, :meth:`NmpcProblem.solve`): (L-BFGS Hessian, the retry's iteration
+budget) — the exact Hessian, then L-BFGS, then the exact Hessian for longer."""
 
 
 def bicycle_step_casadi(x: Any, u: Any, dt: float, l_f: float) -> Any:
@@ -102,8 +107,8 @@ class ParamLayout:
 @dataclass(frozen=True, eq=False)
 class NlpSolution:
     """IPOPT's answer: primal ``w``, duals ``lam_g``/``lam_x``, objective, IPOPT status, iterations,
-    solver wall time [ms], whether it counts as solved, and the status of each attempt (exact
-    Hessian, then L-BFGS)."""
+    solver wall time [ms], whether it counts as solved, and the status of each attempt (the rungs
+    of :data:`LADDER` tried)."""
 
     w: np.ndarray
     lam_g: np.ndarray
@@ -220,15 +225,15 @@ class NmpcProblem:
 
     def _solver(self, warm: bool, lbfgs: bool = False, long: bool = False) -> Any:
         """IPOPT for a warm or cold start, with the L-BFGS Hessian or the exact one, with the
-        retry's iteration budget (L-BFGS and ``long``) or the first attempt's."""
+        retry's iteration budget (``long``) or the first attempt's (one rung of :data:`LADDER`)."""
         s = self._solvers.get((warm, lbfgs, long))
         if s is None:
             import casadi as ca
 
             opts = dict(self._opts_base)
             if lbfgs:
-                opts.update({"ipopt.hessian_approximation": "limited-memory", "ipopt.max_iter": self.retry_max_iter})
-            elif long:
+                opts["ipopt.hessian_approximation"] = "limited-memory"
+            if long:
                 opts["ipopt.max_iter"] = self.retry_max_iter
             if warm:
                 opts.update({"ipopt.warm_start_init_point": "yes", "ipopt.warm_start_bound_push": 1e-6,
@@ -263,12 +268,13 @@ class NmpcProblem:
         sudden swerve (a stopped vehicle entering the 1 s horizon) takes the exact Hessian ≈ 35
         iterations. Iterations and time add up. Numerical failures come back as an unsuccessful :class:`NlpSolution`,
         never raised."""
-        first = self._attempt(w0, p, lam_g0, lam_x0, False)
-        if first.success or not retry:
-            return first
-        tries = [first, self._attempt(w0, p, lam_g0, lam_x0, True)]
-        if not tries[-1].success:
-            tries.append(self._attempt(w0, p, lam_g0, lam_x0, False, long=True))
+        tries = [self._attempt(w0, p, lam_g0, lam_x0, *LADDER[0])]
+        for rung in LADDER[1:] if retry else ():
+            if tries[-1].success:
+                break
+            tries.append(self._attempt(w0, p, lam_g0, lam_x0, *rung))
+        if len(tries) == 1:
+            return tries[0]
         last = tries[-1]
         return NlpSolution(last.w, last.lam_g, last.lam_x, last.cost, last.status,
                            sum(a.iterations for a in tries), sum(a.solve_ms for a in tries), last.success,
