@@ -416,8 +416,7 @@ class ClosedLoop:
         except Exception as exc:  # an internal error: keep the run, say what happened
             status, error = RunStatus.CRASHED, f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}"
         with interruption.shielded():  # what was completed is written whatever arrives now
-            status, error, unwritable = self._finish(directory, writer, fw_writer, status, error, unwritable)
-            summary = self._summary(out_dir, status)
+            summary, error, unwritable = self._finish(directory, writer, fw_writer, status, error, unwritable)
         if self.initial is not None and not self.initial.verified:
             why = "; ".join(str(r) for r in self.initial.refutations) or "no fail-safe"
             diags.append(SIM616(f"the initial state has no verified fail-safe ({why})", where,
@@ -426,10 +425,10 @@ class ClosedLoop:
         if unwritable:
             diags.append(SIM615(f"cannot write the run directory {out_dir}: {error}", where,
                                 hint="free disk space or choose another --out; the steps written so far are kept"))
-        elif status is RunStatus.INTERRUPTED:
+        elif summary.status is RunStatus.INTERRUPTED:
             diags.append(SIM612(f"{error} after {summary.steps} steps ({summary.duration:g} s)", where,
                                 hint=f"the completed steps are in {out_dir}"))
-        elif status is RunStatus.CRASHED:
+        elif summary.status is RunStatus.CRASHED:
             diags.append(SIM613(f"the run stopped after {summary.steps} steps: {error.splitlines()[0]}", where,
                                 hint=f"the completed steps are in {out_dir}; run.json has the traceback"))
         for c in summary.collisions:
@@ -440,10 +439,11 @@ class ClosedLoop:
         return summary, diags
 
     def _finish(self, directory: RunDirectory, writer: TraceWriter | None, fw_writer: FrameWriter | None,
-                status: RunStatus, error: str, unwritable: bool) -> tuple[RunStatus, str, bool]:
+                status: RunStatus, error: str, unwritable: bool) -> tuple[RunSummary, str, bool]:
         """Complete the rows the online monitor still holds, close the trace and the frames and
         record how the run ended in ``run.json`` (with the summary; a crash's traceback); a
-        failure to write turns the status into ``crashed`` (the directory is unwritable)."""
+        failure to write turns the status into ``crashed`` (the directory is unwritable). The
+        run's summary (its final status), the error and whether the directory is unwritable."""
         def failed(exc: OSError) -> None:
             nonlocal status, error, unwritable
             status, unwritable = RunStatus.CRASHED, True
@@ -466,7 +466,8 @@ class ClosedLoop:
             meta["error"] = error.splitlines()[0] if error else "no reason recorded"
             if "\n" in error:
                 meta["traceback"] = error
-        meta["summary"] = self._summary(str(directory.path), status).to_json()
+        summary = self._summary(str(directory.path), status)
+        meta["summary"] = summary.to_json()
         try:
             if writer is not None:
                 writer.close(status, meta["summary"])
@@ -474,7 +475,7 @@ class ClosedLoop:
                 directory.record(status)
         except OSError as exc:
             failed(exc)
-        return status, error, unwritable
+        return replace(summary, status=status), error, unwritable
 
     def _summary(self, out_dir: str, status: RunStatus) -> RunSummary:
         st = self.stats
