@@ -12,7 +12,6 @@ operators, so an inactive rule collapses to ``true`` before the encoder creates 
 from __future__ import annotations
 
 import math
-from dataclasses import fields, replace
 from typing import Callable, Iterable, Mapping, Sequence
 
 from twolevel.stl.ast import (
@@ -25,7 +24,6 @@ from twolevel.stl.ast import (
     Call,
     Compare,
     Edge,
-    Interval,
     Neg,
     Node,
     Not,
@@ -35,6 +33,7 @@ from twolevel.stl.ast import (
     Temporal,
     Var,
     fold,
+    rewrite,
 )
 
 __all__ = [
@@ -103,20 +102,8 @@ def _balanced(op: str, parts: list[Node], sp: object) -> Node:
 def _bind_participant(node: Node, var: str, pid: str) -> Node:
     """``node`` with every signal of participant variable ``var`` read from participant ``pid``'s
     columns (:func:`participant_key`)."""
-    if isinstance(node, ParticipantSignal):
-        return Var(participant_key(node.name, pid), span=node.span) if node.var == var else node
-    changes: dict[str, object] = {}
-    for f in fields(node):
-        value = getattr(node, f.name)
-        if isinstance(value, Node) and not isinstance(value, Interval):
-            new = _bind_participant(value, var, pid)
-            if new is not value:
-                changes[f.name] = new
-        elif isinstance(value, tuple) and value and isinstance(value[0], Node):
-            new_t = tuple(_bind_participant(v, var, pid) for v in value)
-            if any(a is not b for a, b in zip(new_t, value)):
-                changes[f.name] = new_t
-    return replace(node, **changes) if changes else node
+    return rewrite(node, lambda n: Var(participant_key(n.name, pid), span=n.span)
+                   if isinstance(n, ParticipantSignal) and n.var == var else None)
 
 
 def expand_quantifiers(formula: Node, participants: Sequence[str]) -> Node:
@@ -135,23 +122,19 @@ def expand_quantifiers(formula: Node, participants: Sequence[str]) -> Node:
 
 
 def _expand(node: Node, pids: tuple[str, ...]) -> Node:
-    if isinstance(node, Quantifier):
-        body = _expand(node.body, pids)
-        sp = node.span
-        forall = node.op == "forall"
-        if not pids:
-            return BoolConst(forall, span=sp)
-        parts: list[Node] = [Binary("implies" if forall else "and", Var(participant_key(PRESENT, p), span=sp),
-                                    _bind_participant(body, node.var, p), span=sp) for p in pids]
-        return _balanced("and" if forall else "or", parts, sp)
-    changes: dict[str, object] = {}
-    for f in fields(node):
-        value = getattr(node, f.name)
-        if isinstance(value, Node) and not isinstance(value, Interval):
-            new = _expand(value, pids)
-            if new is not value:
-                changes[f.name] = new
-    return replace(node, **changes) if changes else node
+    return rewrite(node, lambda n: _expanded(n, pids) if isinstance(n, Quantifier) else None)
+
+
+def _expanded(node: Quantifier, pids: tuple[str, ...]) -> Node:
+    """One quantifier expanded over ``pids`` (its body's quantifiers first)."""
+    body = _expand(node.body, pids)
+    sp = node.span
+    forall = node.op == "forall"
+    if not pids:
+        return BoolConst(forall, span=sp)
+    parts: list[Node] = [Binary("implies" if forall else "and", Var(participant_key(PRESENT, p), span=sp),
+                                _bind_participant(body, node.var, p), span=sp) for p in pids]
+    return _balanced("and" if forall else "or", parts, sp)
 
 
 def signals_read(formula: Node) -> set[str]:

@@ -21,7 +21,7 @@ samples ``round(a/dt) .. round(b/dt)``.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, replace
 from typing import Callable, Iterator, Literal, TypeVar, Union
 
 from twolevel.diagnostics import Span
@@ -343,3 +343,26 @@ def fold(
             continue
         memo[id(node)] = apply(node, [memo[id(c)] for c in kids])
     return memo[id(root)]
+
+
+def rewrite(node: Node, fn: Callable[[Node], Node | None]) -> Node:
+    """A copy of ``node`` with each node for which ``fn`` gives a node replaced by it (its
+    subtree is not visited further: ``fn`` recurses itself when it needs to); ``fn`` gives
+    ``None`` to keep a node and visit its children. A node none of whose children changed is kept
+    as it is (the same object), so unchanged subtrees stay shared; intervals are parameters, not
+    visited. Substitutions, participant binding and quantifier expansion are built on it."""
+    new = fn(node)
+    if new is not None:
+        return new
+    changes: dict[str, object] = {}
+    for f in fields(node):
+        value = getattr(node, f.name)
+        if isinstance(value, Node) and not isinstance(value, Interval):
+            kid = rewrite(value, fn)
+            if kid is not value:
+                changes[f.name] = kid
+        elif isinstance(value, tuple) and value and isinstance(value[0], Node):
+            kids = tuple(rewrite(v, fn) for v in value)
+            if any(a is not b for a, b in zip(kids, value)):
+                changes[f.name] = kids
+    return replace(node, **changes) if changes else node

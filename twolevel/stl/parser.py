@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import fields, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -50,6 +50,7 @@ from twolevel.stl.ast import (
     RuleFile,
     Temporal,
     Var,
+    rewrite,
 )
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -553,6 +554,10 @@ class _Builder:
         """``node`` with every call ``name(o)`` whose argument is a participant bound by an
         enclosing quantifier turned into a :class:`ParticipantSignal`; a call left that was used
         as a number is reported (STL206)."""
+        return rewrite(node, lambda n: self._bound(n, scope))
+
+    def _bound(self, node: Node, scope: frozenset[str]) -> Node | None:
+        """:meth:`bind`'s rewrite of one node (None: bind its children)."""
         if isinstance(node, Call) and len(node.args) == 1 and isinstance(node.args[0], Var):
             if node.args[0].name in scope:
                 return ParticipantSignal(node.name, node.args[0].name, span=node.span)
@@ -566,19 +571,9 @@ class _Builder:
                          f"... {node.name}({arg}) ..."))
             return node
         if isinstance(node, Quantifier):
-            scope = scope | {node.var}
-        changes: dict[str, Any] = {}
-        for f in fields(node):
-            value = getattr(node, f.name)
-            if isinstance(value, Node) and not isinstance(value, Interval):
-                new = self.bind(value, scope)
-                if new is not value:
-                    changes[f.name] = new
-            elif isinstance(value, tuple) and value and isinstance(value[0], Node):
-                new_t = tuple(self.bind(v, scope) for v in value)
-                if any(a is not b for a, b in zip(new_t, value)):
-                    changes[f.name] = new_t
-        return replace(node, **changes) if changes else node
+            body = self.bind(node.body, scope | {node.var})
+            return node if body is node.body else replace(node, body=body)
+        return None
 
     def _decl_stmt(self, meta: Any, kids: list) -> Any:
         toks = [k for k in kids if not isinstance(k, tuple)]

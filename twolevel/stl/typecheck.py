@@ -15,7 +15,7 @@ from __future__ import annotations
 import difflib
 import itertools
 import math
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 from typing import Callable, Collection, Iterable, Mapping
 
@@ -42,6 +42,7 @@ from twolevel.stl.ast import (
     RuleFile,
     Temporal,
     Var,
+    rewrite,
 )
 
 __all__ = ["RuleSet", "typecheck", "overflow_diagnostics", "BUILTIN_ARITY", "DOMAINS", "map_vars",
@@ -65,20 +66,7 @@ DOMAINS: tuple[str, ...] = ("vehicles",)
 
 def map_vars(node: Node, fn: Callable[[Var], Node]) -> Node:
     """A copy of ``node`` with every :class:`Var` replaced by ``fn(var)``."""
-    if isinstance(node, Var):
-        return fn(node)
-    changes: dict[str, object] = {}
-    for f in fields(node):
-        value = getattr(node, f.name)
-        if isinstance(value, Node) and not isinstance(value, Interval):
-            new = map_vars(value, fn)
-            if new is not value:
-                changes[f.name] = new
-        elif isinstance(value, tuple) and value and isinstance(value[0], Node):
-            new_t = tuple(map_vars(v, fn) for v in value)
-            if any(a is not b for a, b in zip(new_t, value)):
-                changes[f.name] = new_t
-    return replace(node, **changes) if changes else node
+    return rewrite(node, lambda n: fn(n) if isinstance(n, Var) else None)
 
 
 @dataclass(frozen=True)
