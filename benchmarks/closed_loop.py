@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from twolevel.sim.engine import simulate_scenario
-from twolevel.sim.trace import read_run
+from twolevel.sim.trace import RunData, read_run
 from twolevel.verdict.judge import judge_run, recorded_ride
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -71,9 +71,9 @@ def _path(name: str) -> Path:
     return ROOT / "scenarios" / (f"{name}.yaml" if name in SCENARIOS else f"everyday/{name}.yaml")
 
 
-def _progress(name: str, ctrl: str, s, run_dir: Path) -> tuple[str, str]:  # noqa: ANN001 - RunSummary
+def _progress(name: str, ctrl: str, s, run: RunData) -> tuple[str, str]:  # noqa: ANN001 - RunSummary
     """The goal column (time, or how far it got) and the comparison with before."""
-    s_end = float(read_run(run_dir).columns.get("s", [math.nan])[-1])
+    s_end = float(run.columns.get("s", [math.nan])[-1])
     got = f"goal {s.goal_reached_t:.1f} s" if s.goal_reached_t is not None else f"s {s_end:.0f} m"
     ref = BEFORE.get((name, ctrl))
     if ref is None:
@@ -132,8 +132,9 @@ def main() -> None:
                 print(f"{label:<32} failed: " + "; ".join(d.message for d in diags if d.is_error), flush=True)
                 continue
             verdict, _ = judge_run(run_dir, _path(name))
-            ride = recorded_ride(read_run(run_dir).meta)
-            got, before = _progress(name, ctrl, s, run_dir)
+            run = read_run(run_dir)  # once, after judge_run recorded the ride in it
+            ride = recorded_ride(run.meta)
+            got, before = _progress(name, ctrl, s, run)
             print(_row(label, s, got, before, ride, verdict), flush=True)
             runs += 1
             faults += s.at_fault
