@@ -8,22 +8,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from helpers.world_files import load_world
 from twolevel.control.high_level.controller import HighLevelController
 from twolevel.control.nmpc.controller import NmpcController
 from twolevel.control.planner import EgoState, Planner, PlanStatus, PreviousPlan, Snapshot
 from twolevel.control.registry import CONTROLLERS, planner_named
 from twolevel.models import fourwheel as fw
-from twolevel.world.loader import load_scenario
-from twolevel.world.world import World, build_world
+from twolevel.world.world import World
 
 REPO = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
 def comparison() -> World:
-    scn, diags = load_scenario(REPO / "scenarios" / "comparison.yaml")
-    assert scn is not None, diags
-    return build_world(scn)
+    return load_world(REPO / "scenarios" / "comparison.yaml")
 
 
 def test_ego_state_reads_a_pose_or_a_detailed_state() -> None:

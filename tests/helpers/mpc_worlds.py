@@ -12,9 +12,10 @@ from twolevel.control.high_level.controller import HighLevelController
 from twolevel.control.high_level.settings import MPCSettings
 from twolevel.models import bicycle
 from twolevel.stl.lint import load_ruleset
-from twolevel.world.loader import load_scenario
 from twolevel.world.provided import PROVIDED_SIGNALS
-from twolevel.world.world import World, build_world
+from twolevel.world.world import World
+
+from helpers.world_files import load_world
 
 REPO = Path(__file__).resolve().parents[2]
 MAPS = REPO / "maps"
@@ -33,9 +34,7 @@ run: {{duration: 10, seed: 0}}
 """
     p = tmp / f"{name}.yaml"
     p.write_text(text)
-    scn, diags = load_scenario(p)
-    assert scn is not None, [d.message for d in diags]
-    return build_world(scn)
+    return load_world(p)
 
 
 def rules(tmp: Path, text: str, name: str = "r"):
@@ -60,11 +59,10 @@ participants: [{participants}]
 rules: [r.stl]
 run: {{duration: 5, seed: 3}}
 """)
-    scn, diags = load_scenario(str(tmp_path / "s.yaml"))
-    assert scn is not None, [d.message for d in diags]
+    w = load_world(tmp_path / "s.yaml")
     rs, d = load_ruleset(str(tmp_path / "r.stl"), dt=0.1, provided_signals=PROVIDED_SIGNALS)
     assert rs is not None, [x.message for x in d]
-    return build_world(scn), rs
+    return w, rs
 
 
 def controller(world: World, rulesets, **kw) -> HighLevelController:

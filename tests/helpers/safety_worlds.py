@@ -10,9 +10,10 @@ from pathlib import Path
 import numpy as np
 
 from twolevel.models import fourwheel as fw
-from twolevel.world.loader import load_scenario
 from twolevel.world.traffic import TrafficState
-from twolevel.world.world import World, build_world
+from twolevel.world.world import World
+
+from helpers.world_files import load_world
 
 HERE = Path(__file__).resolve().parents[1] / "safety" / "worlds"
 REPO = Path(__file__).resolve().parents[2]
@@ -22,9 +23,7 @@ REPO = Path(__file__).resolve().parents[2]
 def world(name: str) -> World:
     """The world of ``tests/safety/worlds/<name>.yaml`` (or a repository path), built once."""
     path = HERE / f"{name}.yaml" if not name.endswith(".yaml") else REPO / name
-    scn, diags = load_scenario(path)
-    assert scn is not None, [d.message for d in diags]
-    return build_world(scn)
+    return load_world(path)
 
 
 def lane_index(w: World, lane: str) -> int:

@@ -7,9 +7,10 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Callable
 
-from twolevel.world.loader import load_scenario
 from twolevel.world.traffic import EgoBox, TrafficState, step
-from twolevel.world.world import World, build_world
+from twolevel.world.world import World
+
+from helpers.world_files import load_world
 
 TWO_LANES = """\
 kind: map
@@ -62,9 +63,7 @@ def world(tmp: Path, map_text: str, body: str, ego_lane: str = "r", goal: float 
     (tmp / "scn.yaml").write_text(
         f"kind: scenario\nmap: map.yaml\nego: {{start: {{lane: {ego_lane}, s: 0}}}}\n"
         f"route: {{start: {{lane: {ego_lane}, s: 0}}, goal: {{lane: {ego_lane}, s: {goal}}}}}\n" + body)
-    scn, diags = load_scenario(tmp / "scn.yaml")
-    assert scn is not None, [d.message for d in diags]
-    return build_world(scn)
+    return load_world(tmp / "scn.yaml")
 
 
 Ego = EgoBox | Callable[[float], EgoBox] | None

@@ -1,10 +1,14 @@
-"""A small map and a scenario on it, as YAML text, and a writer: the loader tests' starting point
-(each golden case edits one line of them)."""
+"""A small map and a scenario on it, as YAML text, a writer, and the world of a scenario file: the
+loader tests' starting point (each golden case edits one line of them) and every test's way from a
+scenario file to its world."""
 
 from __future__ import annotations
 
 import textwrap
 from pathlib import Path
+
+from twolevel.world.loader import load_scenario
+from twolevel.world.world import World, build_world
 
 MAP = """\
 kind: map
@@ -52,6 +56,14 @@ def write(tmp: Path, name: str, text: str) -> Path:
     p = tmp / name
     p.write_text(textwrap.dedent(text))
     return p
+
+
+def load_world(path: Path | str) -> World:
+    """The world of the scenario file at ``path``, loaded and built for real (the loader's
+    messages shown if it does not load)."""
+    scn, diags = load_scenario(path)
+    assert scn is not None, [d.message for d in diags]
+    return build_world(scn)
 
 
 def write_conflicting(tmp: Path, repo: Path) -> Path:

@@ -14,15 +14,14 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from helpers.world_files import load_world
 from twolevel.cli import app
 from twolevel.monitor.tracefile import Trace, monitor_trace
 from twolevel.stl.lint import check_file, load_ruleset
 from twolevel.stl.parser import parse
 from twolevel.stl.printer import format_file
-from twolevel.world.loader import load_scenario
 from twolevel.world.provided import PROVIDED_PARTICIPANT_SIGNALS, PROVIDED_SIGNALS
 from twolevel.world.signals import TrafficLog, participant_signals_along, signals_along
-from twolevel.world.world import build_world
 
 ROOT = Path(__file__).resolve().parents[2]
 PACK = ROOT / "rules" / "commonroad"
@@ -71,9 +70,7 @@ def _world():
         "participants: [{id: lead, behaviour: constant_velocity, start: {lane: middle, s: 100}},\n"
         "  {id: side, behaviour: constant_velocity, start: {lane: left, s: 100}}]\n"
         "controller: {r_near: 200}\nrun: {duration: 10, seed: 0}\n")
-    scn, diags = load_scenario(str(tmp / "s.yaml"))
-    assert scn is not None, [d.message for d in diags]
-    return build_world(scn)
+    return load_world(tmp / "s.yaml")
 
 
 def _drive(v: np.ndarray, a: np.ndarray, others: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]],

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from helpers.world_files import load_world
 from twolevel.monitor.tracefile import monitor_trace, read_trace
 from twolevel.sim.engine import TIMING_COLUMNS, simulate_scenario
 from twolevel.control.high_level.controller import HighLevelController
@@ -198,13 +199,10 @@ def test_trace_signals_equal_the_world_definitions(urban_run) -> None:
     """The engine's incremental sensing gives what world/signals.py's signals_along gives on
     the recorded trajectory (traffic replayed with the same ego boxes)."""
     from twolevel.world import traffic as tr
-    from twolevel.world.loader import load_scenario
     from twolevel.world.signals import TrafficLog, signals_along
-    from twolevel.world.world import build_world
 
     tmp, _ = urban_run
-    scn, _ = load_scenario(str(tmp / "stops.yaml"))
-    w = build_world(scn)
+    w = load_world(tmp / "stops.yaml")
     c = read_run(tmp / "run").columns
     states, state = [], w.traffic0
     for k in range(len(c["t"])):

@@ -13,12 +13,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
+from helpers.world_files import load_world
 from twolevel.cli import app
 from twolevel.verdict.criteria import judge
 from twolevel.verdict.judge import judge_run
-from twolevel.world.loader import load_scenario
 from twolevel.world.schema import Expect
-from twolevel.world.world import build_world
 
 SUITE = Path(__file__).resolve().parents[1] / "scenarios" / "suite"
 runner = CliRunner()
@@ -82,9 +81,7 @@ def test_bounds_on_the_executed_motion(stuck_run: Path, tmp_path: Path) -> None:
 
 @pytest.fixture(scope="module")
 def road_world():  # noqa: ANN201
-    scn, diags = load_scenario(SUITE / "reach.yaml")
-    assert scn is not None, diags
-    return build_world(scn)
+    return load_world(SUITE / "reach.yaml")
 
 
 def _columns(x: np.ndarray, y: np.ndarray, v: float = 5.0) -> dict[str, np.ndarray]:

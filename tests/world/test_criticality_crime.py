@@ -25,10 +25,9 @@ import pytest
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")  # protobuf, inside commonroad-io
 pytest.importorskip("commonroad_crime", reason="the optional extra crime (commonroad-crime) is not installed")
 
+from helpers.world_files import load_world  # noqa: E402
 from twolevel.world.criticality import headways  # noqa: E402
-from twolevel.world.loader import load_scenario  # noqa: E402
 from twolevel.world.signals import TrafficLog, signals_along  # noqa: E402
-from twolevel.world.world import build_world  # noqa: E402
 
 DT, T, LENGTH, WIDTH, ROAD = 0.1, 60, 4.5, 1.8, 400.0
 EGO, LEAD = 100, 101
@@ -104,12 +103,11 @@ def _twolevel(tmp: Path, tracks: dict[int, dict[str, np.ndarray]]) -> dict[str, 
         f"route: {{start: {{lane: right, s: 1}}, goal: {{lane: right, s: {ROAD - 5}}}}}\n"
         f"participants: [{{id: lead, behaviour: constant_velocity, start: {{lane: right, s: 50}}, {box}}}]\n"
         "controller: {r_near: 200}\nrun: {duration: 5, seed: 0}\n")
-    scn, diags = load_scenario(str(tmp / "s.yaml"))
-    assert scn is not None, [d.message for d in diags]
+    w = load_world(tmp / "s.yaml")
     lead = tracks[LEAD]
     log = TrafficLog(*(lead[k][:, None] for k in ("x", "y", "psi", "v")), np.ones((T, 1), bool),
                      np.array([LENGTH]), np.array([WIDTH]))
-    sig = signals_along(build_world(scn), log, tracks[EGO], dt=DT)
+    sig = signals_along(w, log, tracks[EGO], dt=DT)
     h = headways(sig["d_lead"], sig["v"], sig["v_lead"])
     return {k: np.asarray(v)[list(STEPS)] for k, v in h.items()}
 

@@ -13,7 +13,7 @@ import pytest
 from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 
-from helpers.world_files import write
+from helpers.world_files import load_world, write
 from twolevel.world.geometry import MARKINGS
 from twolevel.world.lanes import centre_lines
 from twolevel.world.loader import load_map, load_scenario
@@ -167,9 +167,7 @@ def test_centre_lines_of_an_evenly_sampled_circle_are_its_tangents():
 
 
 def test_free_form_example_map_adjacency_markings_and_kinds():
-    scn, diags = load_scenario(ROOT / "examples" / "world" / "free_form.yaml")
-    assert scn is not None, diags
-    w = build_world(scn)
+    w = load_world(ROOT / "examples" / "world" / "free_form.yaml")
     ls = w.lanes
     i = dict(ls.index)
     assert ls.left[i["right"]] == i["left"] and ls.right[i["left"]] == i["right"]  # found from the shared boundary

@@ -10,16 +10,14 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from twolevel.world.loader import load_scenario
-from twolevel.world.world import build_world
+from helpers.world_files import load_world
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module", params=["scalability", "traffic_rules", "safety", "comparison"])
 def route(request):  # noqa: ANN001, ANN201
-    scn, _ = load_scenario(ROOT / "scenarios" / f"{request.param}.yaml")
-    return build_world(scn).route
+    return load_world(ROOT / "scenarios" / f"{request.param}.yaml").route
 
 
 def project_near_dense(route, points: np.ndarray, s_center: np.ndarray,  # noqa: ANN001

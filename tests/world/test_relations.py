@@ -9,17 +9,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from twolevel.world.loader import load_scenario
+from helpers.world_files import load_world
 from twolevel.world.relations import acceleration, lanes_occupied, relations
-from twolevel.world.world import build_world
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
 def route():
-    scn, _ = load_scenario(str(ROOT / "scenarios" / "safety.yaml"))
-    return build_world(scn).route  # the highway's middle lane, heading 0, 3.5 m wide
+    return load_world(ROOT / "scenarios" / "safety.yaml").route  # the highway's middle lane, heading 0, 3.5 m wide
 
 
 def _rel(route, others: list[tuple[float, float, float, float]], near: list[bool] | None = None):

@@ -11,21 +11,19 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from twolevel.world.loader import load_scenario
 from twolevel.world.provided import PROVIDED_SIGNALS, SIGNALS
 from twolevel.world.sensing import Memory, others_predicted, sense
 from twolevel.world.signals import TrafficLog, horizon_constants, participant_signals_along, signals_along
 from twolevel.world.traffic import TrafficState
-from twolevel.world.world import build_world
 
 from helpers.traffic_worlds import CROSSING, world
+from helpers.world_files import load_world
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_batched_prediction_equals_signals_along() -> None:
-    scn, _ = load_scenario(str(ROOT / "scenarios" / "traffic_rules.yaml"))
-    w = build_world(scn)
+    w = load_world(ROOT / "scenarios" / "traffic_rules.yaml")
     rng = np.random.default_rng(0)
     K, T, dt = 6, 40, w.settings.dt
     # approach the stop sign (route s = 78) at different speeds and decelerations, slightly off-centre
@@ -68,9 +66,7 @@ def _curved_world():
                         "ego: {start: {lane: east, s: 0}, speed: 5}\n"
                         "route: {start: {lane: east, s: 0}, goal: {lane: east, s: 270}}\n"
                         f"participants: [{parts}]\nrun: {{duration: 10, seed: 0}}\n")
-        scn, diags = load_scenario(str(path))
-        assert scn is not None, [d.message for d in diags]
-        return build_world(scn)
+        return load_world(path)
 
 
 @settings(max_examples=60, deadline=None)
@@ -115,9 +111,7 @@ def _highway_world():
                                 "route: {start: {lane: middle, s: 20}, goal: {lane: middle, s: 600}}\n"
                                 f"participants: [{parts}]\nrules: [rules.stl]\ncontroller: {{r_near: 40}}\n"
                                 "run: {duration: 10, seed: 0}\n")
-    scn, diags = load_scenario(str(tmp / "s.yaml"))
-    assert scn is not None, [d.message for d in diags]
-    return build_world(scn)
+    return load_world(tmp / "s.yaml")
 
 
 def test_batched_participant_signals_equal_the_reference() -> None:

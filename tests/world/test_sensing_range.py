@@ -13,6 +13,7 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
+from helpers.world_files import load_world
 from twolevel.cli import app
 from twolevel.control.high_level.settings import MPCSettings
 from twolevel.world.look_ahead import DEFAULT_HORIZON_S, MAX_COARSE_STEPS, look_ahead_periods
@@ -159,10 +160,8 @@ def _ahead_world(tmp: Path):
     parts = ("[{id: near, behaviour: constant_velocity, start: {lane: left, s: 26}, speed: 10.0},"
              " {id: far, behaviour: constant_velocity, start: {lane: middle, s: 33}, speed: 6.0},"
              " {id: farther, behaviour: constant_velocity, start: {lane: middle, s: 95}, speed: 9.0}]")
-    scn, d = load_scenario(scenario(tmp, "  r_near: 10\n  sensor_range: 60\n", desired="\n  desired_speed: 12",
-                                    participants=parts))
-    assert scn is not None, [x.message for x in d]
-    return build_world(scn)
+    return load_world(scenario(tmp, "  r_near: 10\n  sensor_range: 60\n", desired="\n  desired_speed: 12",
+                               participants=parts))
 
 
 def test_rss_gap_is_the_sensed_vehicle_ahead_beyond_r_near(tmp_path: Path) -> None:

@@ -12,6 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from helpers.world_files import load_world
 from twolevel.control.codes import MIL530
 from twolevel.control.nmpc.controller import NmpcController, NmpcOptions
 from twolevel.control.nmpc.nlp import bicycle_step_casadi
@@ -21,9 +22,8 @@ from twolevel.models import fourwheel as fw
 from twolevel.models.obb import pose_separation
 from twolevel.models.params import VehicleParams
 from twolevel.models.rollout import rollout_accel
-from twolevel.world.loader import load_scenario
 from twolevel.world.signals import StopMemory, update_stop_memory
-from twolevel.world.world import World, build_world
+from twolevel.world.world import World
 
 REPO = Path(__file__).resolve().parents[3]
 RULES = REPO / "rules"
@@ -54,16 +54,12 @@ def street(tmp: Path, ego_s: float, speed: float, rules: list[str], participants
         f"kind: scenario\nname: street\nmap: street.yaml\nego: {{start: {{lane: a, s: {ego_s}}}, speed: {speed}}}\n"
         f"route: {{start: {{lane: a, s: 0}}, goal: {{lane: a, s: 290}}}}\nparticipants: {participants}\n"
         f"rules: [{rl}]\nrun: {{duration: 30, seed: 0}}\n")
-    scn, diags = load_scenario(tmp / "scn.yaml")
-    assert scn is not None, [d.message for d in diags]
-    return build_world(scn)
+    return load_world(tmp / "scn.yaml")
 
 
 @pytest.fixture(scope="module")
 def comparison() -> World:
-    scn, diags = load_scenario(REPO / "scenarios" / "comparison.yaml")
-    assert scn is not None, diags
-    return build_world(scn)
+    return load_world(REPO / "scenarios" / "comparison.yaml")
 
 
 def make(world: World, **kw) -> NmpcController:
@@ -250,9 +246,7 @@ def test_plans_the_papers_horizon_within_the_sensing_speed_bound(tmp_path: Path)
         "ego: {start: {lane: middle, s: 20}, speed: 12.0, desired_speed: 25.0}\n"
         "route: {start: {lane: middle, s: 20}, goal: {lane: middle, s: 1400}, stop_at_goal: false}\n"
         f"rules: [{RULES / 'speed_limit.stl'}]\ncontroller: {{sensor_range: 40}}\nrun: {{duration: 10, seed: 0}}\n")
-    scn, diags = load_scenario(tmp_path / "scn.yaml")
-    assert scn is not None, [d.message for d in diags]
-    w = build_world(scn)
+    w = load_world(tmp_path / "scn.yaml")
     ctrl = make(w)
     assert ctrl.settings.N == ctrl.settings.H == 10 and not ctrl.settings.rss
     xs, res = closed_loop(ctrl, w, 60)
