@@ -18,7 +18,7 @@ at the end of its look-ahead, :mod:`twolevel.control.high_level.settings`):
   seen too close at speed), the constant by which full braking misses it, so the step stays
   feasible and the plan brakes as hard as it must.
 * :func:`drivable_band` — the lateral offsets from the route [m] the ego's reference point may
-  take: the lanes beside the route's lane that run the same way, less half the ego's width.
+  take: the usable lanes beside the route's lane that run the same way, less half the ego's width.
   Sideways motion is never progress (the linearised route progress s_k would otherwise reward a
   swerve that shortens it when a stop line is near).
 * :func:`rss_terminal` — **can stop behind the vehicle ahead**, whatever it does within the
@@ -139,7 +139,7 @@ def _band_table(world: World, spacing: float = 2.0) -> tuple[np.ndarray, np.ndar
             pts = route.position(s, side * j * w)
             chunks = [world.lanes.lookup(pts[i:i + 64], head[i:i + 64])[0] for i in range(0, len(s), 64)]
             lane = np.concatenate(chunks) if chunks else np.zeros(0, int)
-            alive &= lane >= 0
+            alive &= (lane >= 0) & world.lanes.usable[np.maximum(lane, 0)]  # no parking lane, no sidewalk
             if side > 0:
                 hi = np.where(alive, w / 2 + j * w - half, hi)
             else:
@@ -153,8 +153,9 @@ def _band_table(world: World, spacing: float = 2.0) -> tuple[np.ndarray, np.ndar
 
 def drivable_band(world: World, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Lateral bounds (lo, hi) [m] (+ left) for the ego's reference point at route positions
-    ``s`` [m]: the route's lane and the adjacent lanes heading the same way, less half the ego's
-    width (the tighter of the two neighbouring grid points)."""
+    ``s`` [m]: the route's lane and the adjacent usable lanes heading the same way (driving lanes
+    and those the map declares usable: not a parking lane), less half the ego's width (the tighter
+    of the two neighbouring grid points)."""
     grid, lo, hi = _band_table(world)
     i = np.clip(np.searchsorted(grid, np.asarray(s, float)), 1, len(grid) - 1)
     return np.maximum(lo[i - 1], lo[i]), np.minimum(hi[i - 1], hi[i])
