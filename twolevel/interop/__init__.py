@@ -42,6 +42,7 @@ class Format:
 
 FORMATS: tuple[Format, ...] = (
     Format(".xodr", "twolevel.interop.opendrive", "OpenDRIVE"),
+    Format(".net.xml", "twolevel.interop.sumo", "SUMO"),
     Format(".xml", "twolevel.interop.commonroad", "CommonRoad", b"<commonRoad"),
 )
 """Every importer, tried in order: a longer suffix (``.net.xml``) goes before a shorter one it ends

@@ -1,9 +1,9 @@
 """Diagnostic codes of importing other tools' maps and scenarios and exporting runs to them
-(``IMP7xx``), raised by every format's module in :mod:`twolevel.interop` (OpenDRIVE, CommonRoad):
+(``IMP7xx``), raised by every format's module in :mod:`twolevel.interop` (OpenDRIVE, SUMO, CommonRoad):
 a finding says which element of the other tool's file it is about, at that element's line.
 
 Declared once here; each :class:`~twolevel.diagnostics.Code` registers itself. No heavy imports
-(``twolevel check FILE.xodr`` and ``FILE.xml`` go through the importer).
+(``twolevel check FILE.xodr``, ``FILE.net.xml`` and ``FILE.xml`` go through the importer).
 
 ``IMP70x``: the input cannot be used at all (exit 2). ``IMP71x``: parts of it were not converted,
 were repaired, assumed or approximated (the files are still written). ``IMP72x``: the converted

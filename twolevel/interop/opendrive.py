@@ -41,10 +41,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from twolevel.diagnostics import Span
 from twolevel.interop import ImportResult
 from twolevel.interop.carla_reader import Request, isolated, read
-from twolevel.interop.codes import IMP703, IMP704, IMP705, IMP706, IMP712, IMP713, IMP720, IMP721
+from twolevel.interop.codes import IMP703, IMP704, IMP705, IMP706, IMP712, IMP713
 from twolevel.interop.opendrive_roads import EPS as _EPS
 from twolevel.interop.opendrive_roads import Lane, Road, Section, lane_key, read_road, repair, report_unconverted
 from twolevel.interop.opendrive_signals import place_signals
@@ -305,36 +304,15 @@ def import_file(path: str | os.PathLike[str], out_dir: str | os.PathLike[str], i
     """Convert the OpenDRIVE map at ``path`` and write ``<out_dir>/<stem>.yaml`` (``include``: lane
     types of :data:`OPTIONAL_KINDS` imported besides driving lanes); the written map is checked by
     the map loader (its findings, at the YAML's lines, come with the import's)."""
-    from twolevel.atomic import write_text_atomic
-    from twolevel.interop.output import to_yaml
+    from twolevel.interop.output import write_map
     from twolevel.interop.source import read_xml
-    from twolevel.world.document import MAX_BYTES, MAX_NODES
-    from twolevel.world.loader import check_world_file
 
     src, diags = read_xml(path)
     if src is None:
         return ImportResult((), tuple(diags))
     data = convert(src, Options(include=tuple(include)))
-    diags = list(src.findings)
     if data is None:
-        return ImportResult((), tuple(diags))
+        return ImportResult((), tuple(src.findings))
     header = (f"Imported from {Path(path).name} (OpenDRIVE) by `twolevel import`: free-form lanes r<road>_<section>_<lane>.\n"
               "Regenerate rather than edit by hand.")
-    text = to_yaml(data, header)
-    os.makedirs(out_dir, exist_ok=True)
-    target = write_text_atomic(Path(out_dir) / f"{Path(path).stem}.yaml", text)
-    summary = (f"{len(data['lanes'])} lanes, {len(data.get('speed_limits', []))} speed-limit signs, "
-               f"{len(data.get('stop_signs', []))} stop signs, {len(data.get('traffic_lights', []))} lights")
-    size = len(text.encode("utf-8"))
-    nodes = sum(2 * len(v) + 1 for ln in data["lanes"] for k, v in ln.items() if k.endswith("_bound"))
-    if size > MAX_BYTES or nodes > MAX_NODES:
-        diags.append(IMP720(f"the map has {size / 1e6:.1f} MB and about {nodes} YAML nodes; the map loader reads at "
-                            f"most {MAX_BYTES / 1e6:.1f} MB and {MAX_NODES} nodes", Span.whole_file(os.fspath(path)),
-                            hint="import a part of the map (fewer roads), or raise the loader's limits"))
-        return ImportResult((target,), tuple(diags), data, summary)
-    found = check_world_file(target)
-    diags.extend(found)
-    if any(d.is_error for d in found):
-        diags.append(IMP721(f"the imported map {target.name} does not pass the map checks (above)",
-                            Span.whole_file(os.fspath(path))))
-    return ImportResult((target,), tuple(diags), data, summary)
+    return write_map(data, header, path, Path(out_dir) / f"{Path(path).stem}.yaml", src.findings)

@@ -1,6 +1,7 @@
 """How an importer writes what it converted: a map (and a scenario, when the format has one) as
 readable YAML files that ``twolevel check`` accepts (the same schema as hand-written ones), written
-atomically; :func:`to_yaml` is the one YAML writer of every format (OpenDRIVE, CommonRoad).
+atomically; :func:`to_yaml` is the one YAML writer of every format (OpenDRIVE, CommonRoad, SUMO),
+:func:`write_map` the one way a map-only format's map is written and checked.
 
 Points ``[x, y]``, other short lists of numbers and polylines of points are flow lists (one line); numbers are rounded to
 millimetres (``DIGITS``); the files start with a comment naming the source and the findings.
@@ -15,12 +16,15 @@ import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 from twolevel.atomic import write_text_atomic
-from twolevel.diagnostics import Diagnostic
+from twolevel.diagnostics import Diagnostic, Span
 
-__all__ = ["Imported", "DIGITS", "to_yaml", "write_imported", "MAP_FILE", "SCENARIO_FILE"]
+if TYPE_CHECKING:
+    from twolevel.interop import ImportResult
+
+__all__ = ["Imported", "DIGITS", "to_yaml", "write_imported", "write_map", "MAP_FILE", "SCENARIO_FILE"]
 
 DIGITS = 3  # decimals kept of every number [m, s, m/s]: millimetres
 MAP_FILE = "map.yaml"
@@ -148,3 +152,45 @@ def write_imported(imported: Imported, out_dir: str | os.PathLike[str]) -> Seque
     out.mkdir(parents=True, exist_ok=True)
     return [write_text_atomic(out / MAP_FILE, to_yaml(imported.map, _header(imported, "Map"))),
             write_text_atomic(out / SCENARIO_FILE, to_yaml(imported.scenario, _header(imported, "Scenario")))]
+
+
+def _nodes(value: Any) -> int:
+    """YAML nodes of ``value`` as the map loader counts them (each mapping, sequence and scalar
+    value; keys are not counted: twolevel/world/document.py)."""
+    if isinstance(value, dict):
+        return 1 + sum(_nodes(v) for v in value.values())
+    if isinstance(value, (list, tuple)):
+        return 1 + sum(_nodes(v) for v in value)
+    return 1
+
+
+def write_map(data: dict[str, Any], header: str, source: str | os.PathLike[str], target: str | os.PathLike[str],
+              findings: Sequence[Diagnostic] = ()) -> ImportResult:
+    """Write the converted map ``data`` to ``target`` (atomically, ``header`` as its first comment
+    lines) and check it with the map loader: the result holds ``findings`` (the source's), then the
+    loader's at the YAML's lines and IMP721 at ``source`` when they hold errors — or IMP720 instead
+    of checking when the map is larger than the loader reads."""
+    from twolevel.interop import ImportResult
+    from twolevel.interop.codes import IMP720, IMP721
+    from twolevel.world.document import MAX_BYTES, MAX_NODES
+    from twolevel.world.loader import check_world_file
+
+    text = to_yaml(data, header)
+    out = Path(target)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    written = write_text_atomic(out, text)
+    diags = list(findings)
+    summary = (f"{len(data['lanes'])} lanes, {len(data.get('speed_limits', []))} speed-limit signs, "
+               f"{len(data.get('stop_signs', []))} stop signs, {len(data.get('traffic_lights', []))} lights")
+    whole = Span.whole_file(os.fspath(source))
+    size, nodes = len(text.encode("utf-8")), _nodes(data)
+    if size > MAX_BYTES or nodes > MAX_NODES:
+        diags.append(IMP720(f"the map has {size / 1e6:.1f} MB and about {nodes} YAML nodes; the map loader reads at "
+                            f"most {MAX_BYTES / 1e6:.1f} MB and {MAX_NODES} nodes", whole,
+                            hint="import a part of the map, or raise the loader's limits"))
+        return ImportResult((written,), tuple(diags), data, summary)
+    found = check_world_file(written)
+    diags.extend(found)
+    if any(d.is_error for d in found):
+        diags.append(IMP721(f"the imported map {written.name} does not pass the map checks (above)", whole))
+    return ImportResult((written,), tuple(diags), data, summary)
