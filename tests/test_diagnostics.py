@@ -46,7 +46,7 @@ def test_bad_input_is_a_property_of_the_code_and_only_of_errors() -> None:
 ROOT = Path(__file__).resolve().parents[1] / "twolevel"
 STAGE_PREFIXES = {  # the codes.py of each stage and the codes it may declare
     "stl": ("STL",), "world": ("YML",), "compiler": ("MIL50",), "control": ("MIL51", "MIL52", "MIL53"),
-    "monitor": ("SIM60",), "sim": ("SIM61",), "verdict": ("SIM62",), "pipeline": ("CLI",),
+    "monitor": ("SIM60",), "sim": ("SIM61", "SIM63"), "verdict": ("SIM62",), "pipeline": ("CLI",),
     "interop": ("IMP",),
 }
 

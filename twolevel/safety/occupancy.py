@@ -195,10 +195,10 @@ def _wait_not_red(net: Network, light: np.ndarray, t_abs: np.ndarray) -> np.ndar
 
 def lane_of(net: Network, traffic: TrafficState, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Lane and s [m] of participants ``idx``: the simulator's lane where it tracks one, else
-    the lane the pose lies on (heading within 90°), else −1."""
+    the lane the pose lies on (heading within 90°), else −1 (always for inactive ones)."""
     lane = traffic.lane[idx].astype(int)
     s = traffic.s[idx].astype(float)
-    miss = lane < 0
+    miss = (lane < 0) & traffic.active[idx]
     if miss.any():
         pts = np.stack([traffic.x[idx][miss], traffic.y[idx][miss]], axis=1)
         ln, sl, _ = net.world.lanes.lookup(pts, traffic.psi[idx][miss])

@@ -1,4 +1,5 @@
-"""Diagnostic codes of closed-loop simulation (``SIM61x``; ``SIM60x`` are the trace monitor's).
+"""Diagnostic codes of closed-loop simulation (``SIM61x``; ``SIM63x`` traffic co-simulated in SUMO;
+``SIM60x`` are the trace monitor's).
 
 Declared once here; each :class:`~twolevel.diagnostics.Code` registers itself. No heavy imports.
 """
@@ -9,7 +10,7 @@ from twolevel.diagnostics import Code, Severity
 
 E, W, I = Severity.ERROR, Severity.WARNING, Severity.INFO
 
-__all__ = ["SIM610", "SIM611", "SIM612", "SIM613", "SIM614", "SIM615", "SIM616", "SIM617", "SIM618"]
+__all__ = ["SIM610", "SIM611", "SIM612", "SIM613", "SIM614", "SIM615", "SIM616", "SIM617", "SIM618", "SIM630", "SIM631"]
 
 SIM610 = Code("SIM610", "bad-controller", E, "The requested controller is not known or not available.")
 SIM611 = Code("SIM611", "bad-run-setting", E, "A run setting given on the command line is out of range.")
@@ -25,3 +26,5 @@ SIM617 = Code("SIM617", "run-dir-busy", E, "Another run is writing the run direc
               "(choose another --out, or wait for the first).", bad_input=True)
 SIM618 = Code("SIM618", "rules-unsatisfiable", W, "For a while no plan satisfied every rule: the high level fell back; the "
               "message names the rules that conflict and what the car did instead.")
+SIM630 = Code("SIM630", "sumo-unavailable", E, "SUMO traffic needs libsumo (pip install 'twolevel[sumo]').")
+SIM631 = Code("SIM631", "sumo-start-failed", E, "SUMO could not start with the scenario's network and routes.")

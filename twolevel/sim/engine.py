@@ -112,6 +112,7 @@ from twolevel.sim.provenance import run_metadata
 from twolevel.sim.robustness import RuleColumns
 from twolevel.sim.summary import Collision, RunSummary, StepDecision, StepInfo, summarise
 from twolevel.sim.trace import BASE_COLUMNS, RunDirectory, RunStatus, TraceWriter
+from twolevel.sim.traffic_engine import BuiltinTraffic, TrafficEngine, traffic_engine
 from twolevel.sim.unsatisfiable import UnsatisfiableLog
 from twolevel.stl.typecheck import RuleSet
 from twolevel.world import traffic as tr
@@ -331,8 +332,10 @@ class ClosedLoop:
     records kept between steps."""
 
     def __init__(self, world: World, scn: Scenario, planner: Planner, rulesets: list[RuleSet], monitor: bool,
-                 controller: str, safety: bool = True, ttr_every: int = TTR_EVERY) -> None:
+                 controller: str, safety: bool = True, ttr_every: int = TTR_EVERY,
+                 traffic: TrafficEngine | None = None) -> None:
         self.world, self.scn, self.planner = world, scn, planner
+        self.traffic: TrafficEngine = traffic if traffic is not None else BuiltinTraffic(world)
         self.monitor, self.controller = monitor, controller
         self.label = StepDecision(planner.label)  # the decision of its unchecked steps (no monitor)
         self.safety = monitor and safety
@@ -370,7 +373,11 @@ class ClosedLoop:
         diags += d
         if planner is None:
             return None, diags
-        return cls(world, scn, planner, sets, monitor, controller, safety, ttr_every), diags
+        traffic, d = traffic_engine(world, scn)
+        diags += d
+        if traffic is None:
+            return None, diags
+        return cls(world, scn, planner, sets, monitor, controller, safety, ttr_every, traffic), diags
 
     # ------------------------------------------------------------------------------ the run
     def run(self, out_dir: str, progress: Callable[[StepInfo], None] | None, frames: bool,
@@ -416,6 +423,10 @@ class ClosedLoop:
         except Exception as exc:  # an internal error: keep the run, say what happened
             status, error = RunStatus.CRASHED, f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}"
         with interruption.shielded():  # what was completed is written whatever arrives now
+            try:
+                self.traffic.close()  # first: SUMO is closed whatever happens next
+            except Exception as exc:  # libsumo's own failure: the run's files are still completed
+                status, error = RunStatus.CRASHED, error or f"{type(exc).__name__}: {exc}"
             summary, error, unwritable = self._finish(directory, writer, fw_writer, status, error, unwritable)
         if self.initial is not None and not self.initial.verified:
             why = "; ".join(str(r) for r in self.initial.refutations) or "no fail-safe"
@@ -502,7 +513,9 @@ class ClosedLoop:
         dt = s.dt
         steps = int(round(s.duration / dt))
         x = fw.initial_state(w.ego.x, w.ego.y, w.ego.psi, w.ego.v, p)
-        state = LoopState(x, w.traffic0, Memory.fresh(w), float(w.route.local_coordinates(x[None, :2])[0][0]))
+        traffic0 = self.traffic.start(w.traffic0, tr.EgoBox(w.ego.x, w.ego.y, w.ego.psi, w.ego.v, w.ego.length,
+                                                            w.ego.width, w.route.lanes))
+        state = LoopState(x, traffic0, Memory.fresh(w), float(w.route.local_coordinates(x[None, :2])[0][0]))
         keep = max([r.past for r in self.rules] + [self.planner.history_depth])
         out = Recorders(writer, frames, History(SIGNALS + self.extra.signals, keep))
         self.low.warm_up(x)
@@ -650,9 +663,10 @@ class ClosedLoop:
         X, Y, psi, v = (float(c) for c in sensed.ego.pose)
         p0 = time.perf_counter()
         x_next = rollout(x, applied.control[None, None, :], s.dt, self.params).states[0, 1]
-        traffic = tr.step(sensed.traffic, s.dt, lanes=w.lanes, parts=w.parts, limits=w.limits, lights=w.lights,
-                          stops=w.stops, ego=tr.EgoBox(X, Y, psi, v, w.ego.length, w.ego.width, w.route.lanes),
-                          stop_speed=s.stop_speed)
+        box = lambda x, y, psi, v: tr.EgoBox(x, y, psi, v, w.ego.length, w.ego.width, w.route.lanes)  # noqa: E731
+        after = box(float(x_next[0]), float(x_next[1]), float(x_next[2]),
+                    float(math.copysign(math.hypot(x_next[3], x_next[4]), x_next[3])))
+        traffic = self.traffic.step(sensed.traffic, s.dt, box(X, Y, psi, v), after)
         plant_ms = (time.perf_counter() - p0) * 1e3
         return LoopState(x_next, traffic, sensed.memory_after, sensed.s0, applied.accel,
                          float(applied.control[0])), plant_ms

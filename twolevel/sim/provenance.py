@@ -51,8 +51,16 @@ def run_metadata(world: World, scn: Scenario, *, monitor: bool, controller: str,
     ``timing_columns``: the trace's wall-clock columns; ``safety``: the low level's safety layer
     was on (with the assumptions about others it rests on)."""
     s = world.settings
+    t = scn.spec.traffic
+    traffic: dict[str, Any] = {"engine": "builtin"}
+    if t is not None:  # the other engine's files, as the scenario's own
+        traffic = {"engine": t.engine, "net": {"path": t.net, "sha256": sha256_of(t.net)},
+                   "routes": [{"path": r, "sha256": sha256_of(r)} for r in t.routes],
+                   "random_trips": t.random_trips.vehicles if t.random_trips is not None else 0,
+                   "seed": s.seed if t.seed is None else t.seed, "radius": t.radius, "slots": t.slots}
     return {
         "scenario": {"name": world.name, "path": scn.path, "sha256": sha256_of(scn.path)},
+        "traffic": traffic,
         "map": {"path": scn.map.path, "sha256": sha256_of(scn.map.path)},
         "rules": [{"path": p, "sha256": sha256_of(p), "constants": dict(c)} for p, c in world.rule_files],
         "settings": {"H": s.H, "dt": s.dt, "r_near": s.r_near, "r": s.r, "D_safe": s.D_safe, "samples": s.samples,

@@ -732,6 +732,23 @@ def load_map(path: str | os.PathLike[str]) -> tuple[Map | None, list[Diagnostic]
     return _load_map(Path(path), None)
 
 
+def _traffic_files(spec: ScenarioFile, doc: Document) -> tuple[ScenarioFile, list[Diagnostic]]:
+    """The scenario with its traffic engine's files resolved (relative to the file naming them),
+    and YML418 for each that does not exist."""
+    t = spec.traffic
+    if t is None:
+        return spec, []
+    diags: list[Diagnostic] = []
+    found = []
+    for key, name in [(("traffic", "net"), t.net)] + [(("traffic", "routes", i), r) for i, r in enumerate(t.routes)]:
+        at = doc.locate(key, value=True)
+        target = _resolve(name, at)
+        if not _is_file(target):
+            diags.append(YML418(f"SUMO file not found: {name}", at, hint="paths are relative to the scenario file"))
+        found.append(str(target))
+    return spec.model_copy(update={"traffic": t.model_copy(update={"net": found[0], "routes": found[1:]})}), diags
+
+
 def load_scenario(path: str | os.PathLike[str], parameters: Mapping[str, float] | None = None
                   ) -> tuple[Scenario | None, list[Diagnostic]]:
     """Load a scenario, the scenarios it extends, and its map; locate its rule files.
@@ -765,6 +782,8 @@ def load_scenario(path: str | os.PathLike[str], parameters: Mapping[str, float] 
             diags.append(YML418(f"rule file not found: {ref.file}", at, hint="paths are relative to the scenario file"))
         rules.append(RuleFile(str(target), tuple(sorted(ref.constants.items())), at))
     diags += _check_rule_names(rules)
+    spec, tdiags = _traffic_files(spec, doc)
+    diags += tdiags
     if m is None:
         return None, diags
     diags += explain(_check_scenario(spec, doc, m.spec), sub) + check_variants(spec, doc)

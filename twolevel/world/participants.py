@@ -37,7 +37,7 @@ from twolevel.world.traffic.manoeuvres import plans_of
 from twolevel.world.traffic.pedestrians import crossing_path, walks_of
 from twolevel.world.traffic.triggers import AFTER, TRIGGERS
 
-__all__ = ["CYCLIST_IDM", "BOXES", "pose_of", "population_slots", "participants_of"]
+__all__ = ["CYCLIST_IDM", "BOXES", "SLOT_PREFIX", "pose_of", "population_slots", "participants_of"]
 
 _BEHAVIOURS = {"stationary": STATIONARY, "constant_velocity": CONSTANT_VELOCITY, "idm": IDM, "scripted": SCRIPTED,
                "walk": WALK}
@@ -45,6 +45,10 @@ CYCLIST_IDM = IDMParams(v0=5.0, T=1.0, s0=1.5, a=1.0, b=1.5)
 """A cyclist's IDM defaults (a stated choice: 18 km/h, urban cycling)."""
 BOXES = {"bicycle": Box(length=1.8, width=0.65), "pedestrian": Box(length=0.5, width=0.6)}
 """Boxes by kind where the scenario gives none (a vehicle's and a parked car's: the schema's)."""
+SLOT_PREFIX = "sumo:"
+"""Ids of the participants another traffic engine fills (``sumo:0``, …): the scenario's
+``traffic.slots`` of them, after its own participants, inactive until a vehicle takes one
+(:mod:`twolevel.sim.cosim`)."""
 
 
 def pose_of(p: Placement, lanes: LaneSet, index: dict[str, int]) -> tuple[float, float, float, int, float, float]:
@@ -133,10 +137,17 @@ def _participant(p: Participant, lanes: LaneSet, index: dict[str, int]) -> dict[
     return row
 
 
+def _slot(k: int, box: Box, lanes: LaneSet) -> dict[str, Any]:
+    """Engine slot ``k``: a car of ``box`` the traffic engine moves (stationary to the built-in
+    traffic, off the map until the engine fills it)."""
+    car = Participant.model_construct(id=f"{SLOT_PREFIX}{k}", kind="car", box=box)  # placed by the engine, not here
+    return _row(car, car.id, STATIONARY, (0.0, 0.0, 0.0, -1, 0.0, 0.0), 0.0, lanes)
+
+
 def participants_of(spec: ScenarioFile, lanes: LaneSet, index: dict[str, int], assumptions: Assumptions,
                     ego_lane: int, ego_s: float) -> tuple[Participants, TrafficState]:
-    """The participants (one by one, then each population's, deterministic for the seed) and
-    their state at t = 0."""
+    """The participants (one by one, then each population's, deterministic for the seed, then the
+    traffic engine's slots, inactive) and their state at t = 0."""
     rows = [_participant(p, lanes, index) for p in spec.participants]
     for pop in spec.populations:
         rng = np.random.default_rng(spec.run.seed if pop.seed is None else pop.seed)
@@ -149,6 +160,8 @@ def participants_of(spec: ScenarioFile, lanes: LaneSet, index: dict[str, int], a
             pose = (float(xy[j, 0]), float(xy[j, 1]), float(h[j]), int(li[j]), float(sv[j]), 0.0)
             v = 0.0 if pop.behaviour == "stationary" else float(speeds[j])
             rows.append(_row(pop, f"{pop.id}-{j}", _BEHAVIOURS[pop.behaviour], pose, v, lanes))
+    engine = spec.traffic.slots if spec.traffic is not None else 0
+    rows += [_slot(k, spec.traffic.box, lanes) for k in range(engine)]  # type: ignore[union-attr]
     n = len(rows)
     wmax = max([len(r["wp"]) for r in rows] + [2])
     st = np.zeros((n, wmax))
@@ -170,5 +183,5 @@ def participants_of(spec: ScenarioFile, lanes: LaneSet, index: dict[str, int], a
                          col("changes", bool), col("gap"), col("right"), plans_of([r["plan"] for r in rows], index),
                          walks, assumptions.response)
     state = TrafficState(0.0, col("x"), col("y"), col("psi"), col("v"), col("lane", int), col("s"), col("lat"),
-                         np.ones(n, dtype=bool), np.zeros(n), np.full(n, -1, dtype=int), Memory.fresh(n))
+                         np.arange(n) < n - engine, np.zeros(n), np.full(n, -1, dtype=int), Memory.fresh(n))
     return parts, state

@@ -28,7 +28,7 @@ __all__ = [
     "Arc", "Segment", "StartPose", "LaneSpec", "Road", "FreeLane", "MarkingSpec", "ZoneSpec", "ArmSpec",
     "ConnectionSpec", "SignalSpec", "JunctionSpec", "LaneKind", "LaneCategory", "MarkingKind", "ParticipantKind", "Point", "MAX_LANE_POINTS", "MIN_WIDTH", "SpeedLimitSign", "StopSign", "LightCycle",
     "LightStep", "TrafficLight", "MapFile", "LanePos", "Placement", "Box", "Ego", "RouteSpec",
-    "IDMParams", "Waypoint", "MobilParams", "Manoeuvre", "Walk", "Participant", "Population",
+    "IDMParams", "Waypoint", "MobilParams", "Manoeuvre", "Walk", "Participant", "Population", "RandomTrips", "SumoTraffic",
     "MANOEUVRE_ACTIONS", "TRIGGER_KEYS", "RuleRef", "ControllerSettings",
     "RunSettings", "WeightsSpec", "ScenarioFile", "KMH", "Number", "Count", "COORD_MAX", "DEFAULT_SENSOR_RANGE",
     "TIME_MAX", "CONST_MAX", "SEED_MAX", "S_MAX", "MIN_PIECE", "MIN_SPACING", "MAX_ROUTE_POINTS",
@@ -647,6 +647,29 @@ class Population(_Model):
         return self
 
 
+class RandomTrips(_Model):
+    """SUMO vehicles on random routes: ``vehicles`` are kept on the network, each one that arrives
+    replaced by a new one between two edges drawn from the seed."""
+
+    vehicles: Count = Field(ge=1, le=20_000, description="vehicles kept on the network")
+
+
+class SumoTraffic(_Model):
+    """Other vehicles driven by SUMO in the same process (libsumo), the ego moved in SUMO each step
+    as CARLA's co-simulation does (twolevel/sim/cosim.py). The map should be the network's
+    import (``twolevel import NET.net.xml``), so that lanes and lights agree."""
+
+    engine: Literal["sumo"] = Field(description="'sumo'")
+    net: FilePath = Field(description="the SUMO network (.net.xml), relative to the scenario")
+    routes: list[FilePath] = Field(default_factory=list, description="SUMO route files (vehicles, routes, flows, trips)")
+    random_trips: RandomTrips | None = Field(default=None, description="vehicles on random routes {vehicles}")
+    seed: Count | None = Field(default=None, ge=0, le=2**31 - 1, description="SUMO's seed and the trips'; default: the run's")
+    radius: Number = Field(default=100.0, gt=0, le=2000, description="SUMO vehicles within this distance of the ego are read [m]")
+    slots: Count = Field(default=64, ge=1, le=1000, description="most SUMO vehicles near the ego the loop sees (the nearest)")
+    box: Box = Field(default_factory=lambda: Box(length=5.0, width=1.8),
+                     description="bounding box of SUMO's vehicles as the controller sees them [m] (SUMO's passenger car)")
+
+
 class RuleRef(_Model):
     """A rule file and the values of its constants."""
 
@@ -905,6 +928,7 @@ class ScenarioFile(_Model):
     route: RouteSpec = Field(description="route from A to B")
     participants: list[Participant] = Field(default_factory=list, description="other traffic, one by one")
     populations: list[Population] = Field(default_factory=list, description="other traffic, by the lane-full")
+    traffic: SumoTraffic | None = Field(default=None, description="more traffic from another engine {engine: sumo, net, …}")
     rules: list[RuleRef] = Field(default_factory=list, description="rule files and constant bindings")
     controller: ControllerSettings = Field(default_factory=ControllerSettings, description="controller settings")
     run: RunSettings = Field(default_factory=RunSettings, description="run settings")
