@@ -314,84 +314,131 @@ def _level(net_root: np.ndarray, world: World, ref: int, member: int) -> np.ndar
     return np.interp(net_root[ls.vptr[member]:ls.vptr[member + 1]], table, ls.lanes[ref].s)
 
 
-def _trees(world: World, group: np.ndarray, dlat: np.ndarray, exact: np.ndarray, root_s: np.ndarray, change: bool,
-           limits: np.ndarray, lines: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
-           lane_kappa: np.ndarray) -> LaneTrees:
+def _ref_tables(world: World, group: np.ndarray, dlat: np.ndarray, exact: np.ndarray, root_s: np.ndarray,
+                change: bool, limits: np.ndarray, lines: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+                lane_kappa: np.ndarray) -> dict[str, np.ndarray]:
+    """What a tree node holds depends on its ref lane only (its offset aside): per lane as a
+    node's ref, its members and everything about them (padded as in :class:`LaneTrees`), whether
+    it is a leaf, the largest limit, the stretch and shrink of its members, and the lines' path
+    positions relative to the node's offset. Built once per lane, so a tree of many nodes costs
+    no more than indexing these tables."""
     lanes = world.lanes.lanes
     n = len(lanes)
     members_of = {g: sorted(np.flatnonzero(group == g).tolist(), key=lambda i: dlat[i]) for g in set(group.tolist())}
+    mem_of = [members_of[group[r]] if change else [r] for r in range(n)]
+    m_max = max(len(m) for m in mem_of)
     _, _, line_lane, line_s = lines
     lines_on = {i: np.flatnonzero(line_lane == i) for i in range(n)}
-    rows: list[tuple] = []  # (ref, natural, offset, parent_rel, leaf, members, depth)
-    ptr = [0]
-    limit, stretch, shrink, extent = np.zeros(n), np.ones(n), np.ones(n), np.full(n, np.inf)
-    for root in range(n):
-        nodes = [(root, root, 0.0, -1, 0)]  # ref, natural, offset, parent, depth
-        k = 0
-        while k < len(nodes):
-            ref, nat, off, _, depth = nodes[k]
-            mem = members_of[group[ref]] if change else [ref]
-            end = off + lanes[ref].length
-            if end < REACH and len(nodes) < MAX_NODES:
-                succ: dict[int, tuple[int, int]] = {}  # child key → (ref, natural)
-                for m in mem:
-                    for q in lanes[m].successors:
-                        key = int(group[q]) if change else int(q)
-                        natural = int(q) if (nat >= 0 and m == nat) else -1
-                        if key not in succ or (natural >= 0 and succ[key][1] < 0):
-                            succ[key] = (int(q), natural)
-                for q, natural in succ.values():
-                    nodes.append((q, natural, end, k, depth + 1))
-            elif any(lanes[m].successors for m in mem):
-                extent[root] = min(extent[root], end)  # cut: beyond here the tree says nothing
-            k += 1
-        for ref, nat, off, parent, depth in nodes:
-            mem = members_of[group[ref]] if change else [ref]
-            leaf = not any(lanes[m].successors for m in mem)
-            rows.append((ref, nat, off, parent, leaf, mem, depth))
-            limit[root] = max(limit[root], max(limits[m] for m in mem))
-            for m in mem:
-                if m != ref:
-                    level = lanes[ref].s if exact[m] and exact[ref] else _level(root_s, world, ref, m)
-                    ratio = np.diff(level) / np.maximum(np.diff(lanes[m].s), 1e-12)
-                    ok = np.diff(lanes[m].s) > 1e-9
-                    if ok.any():
-                        stretch[root] = max(stretch[root], float(ratio[ok].max()))
-                        shrink[root] = min(shrink[root], float(ratio[ok].min()))
-        ptr.append(len(rows))
-    N = len(rows)
-    M = max(len(r[5]) for r in rows)
-    members = np.full((N, M), -1, dtype=int)
-    dl = np.zeros((N, M))
-    half = np.zeros((N, M))
-    own = np.zeros((N, M), dtype=bool)
-    spread = np.zeros((N, M))
-    kappa = np.zeros(N)
-    line = np.full((N, M, _MAX_LINES), -1, dtype=int)
-    line_x = np.full((N, M, _MAX_LINES), np.inf)
+    t = {"members": np.full((n, m_max), -1, dtype=int), "dlat": np.zeros((n, m_max)), "half": np.zeros((n, m_max)),
+         "own": np.zeros((n, m_max), dtype=bool), "spread": np.zeros((n, m_max)), "kappa": lane_kappa.astype(float).copy(),
+         "line": np.full((n, m_max, _MAX_LINES), -1, dtype=int), "line_x": np.full((n, m_max, _MAX_LINES), np.inf),
+         "leaf": np.zeros(n, dtype=bool), "limit": np.zeros(n), "stretch": np.ones(n), "shrink": np.ones(n)}
     width = world.lanes.width
-    for i, (ref, _, off, _, _, mem, _) in enumerate(rows):
-        kappa[i] = lane_kappa[ref]
+    for ref, mem in enumerate(mem_of):
+        t["leaf"][ref] = not any(lanes[m].successors for m in mem)
+        t["limit"][ref] = max(limits[m] for m in mem)
         for j, m in enumerate(mem):
-            members[i, j] = m
-            dl[i, j] = dlat[m] - dlat[ref]
-            half[i, j] = width[m] / 2
+            t["members"][ref, j] = m
+            t["dlat"][ref, j] = dlat[m] - dlat[ref]
+            t["half"][ref, j] = width[m] / 2
             q = lines_on[m][:_MAX_LINES]
-            line[i, j, : len(q)] = q
+            t["line"][ref, j, : len(q)] = q
             if m == ref or (exact[m] and exact[ref]):
                 # a member's line at s on the member is at the same vertex fraction on the ref lane
-                line_x[i, j, : len(q)] = off + np.interp(line_s[q], lanes[m].s, lanes[ref].s)
-                continue
-            own[i, j] = True
-            kappa[i] = max(kappa[i], lane_kappa[m])
-            line_x[i, j, : len(q)] = off + np.interp(line_s[q], lanes[m].s, _level(root_s, world, ref, m))
-            # how far the member's band strays from dl ± half in the ref's frame (for bounding circles)
-            _, lat = world.lanes.project(np.full(2 * len(lanes[m].s), ref),
-                                         np.concatenate([lanes[m].left_bound, lanes[m].right_bound]))
-            spread[i, j] = max(float(lat.max()) - dl[i, j] - half[i, j], dl[i, j] - half[i, j] - float(lat.min()), 0.0) + MAP_SLACK
-    col = lambda j, dtype: np.array([r[j] for r in rows], dtype=dtype)  # noqa: E731
-    return LaneTrees(np.asarray(ptr, dtype=int), col(0, int), col(1, int), col(2, float), col(3, int), col(6, int),
-                     col(4, bool), members, dl, line, line_x, limit, stretch, shrink, extent, half, own, spread, kappa)
+                t["line_x"][ref, j, : len(q)] = np.interp(line_s[q], lanes[m].s, lanes[ref].s)
+                level = lanes[ref].s
+            else:
+                level = _level(root_s, world, ref, m)
+                t["own"][ref, j] = True
+                t["kappa"][ref] = max(t["kappa"][ref], lane_kappa[m])
+                t["line_x"][ref, j, : len(q)] = np.interp(line_s[q], lanes[m].s, level)
+                # how far the member's band strays from dl ± half in the ref's frame (for bounding circles)
+                _, lat = world.lanes.project(np.full(2 * len(lanes[m].s), ref),
+                                             np.concatenate([lanes[m].left_bound, lanes[m].right_bound]))
+                dl, half = t["dlat"][ref, j], t["half"][ref, j]
+                t["spread"][ref, j] = max(float(lat.max()) - dl - half, dl - half - float(lat.min()), 0.0) + MAP_SLACK
+            if m != ref:
+                ratio = np.diff(level) / np.maximum(np.diff(lanes[m].s), 1e-12)
+                ok = np.diff(lanes[m].s) > 1e-9
+                if ok.any():
+                    t["stretch"][ref] = max(t["stretch"][ref], float(ratio[ok].max()))
+                    t["shrink"][ref] = min(t["shrink"][ref], float(ratio[ok].min()))
+    return t
+
+
+def _children(world: World, group: np.ndarray, dlat: np.ndarray, change: bool) -> tuple[np.ndarray, np.ndarray,
+                                                                                         np.ndarray]:
+    """The children of a node by its ref lane and whether the ref is the node's natural lane (a
+    node's natural lane is its ref or none): CSR ``ptr`` (2L+1,) over rows ``2·ref + natural``,
+    the children's ``ref`` and ``natural`` flag, in the order the trees list them (with lane
+    changes one child per group reached, on the natural lane's successor where there is one)."""
+    lanes = world.lanes.lanes
+    n = len(lanes)
+    members_of = {g: sorted(np.flatnonzero(group == g).tolist(), key=lambda i: dlat[i]) for g in set(group.tolist())}
+    ptr, ref, nat = [0], [], []
+    for r in range(n):
+        mem = members_of[group[r]] if change else [r]
+        for natural in (False, True):
+            succ: dict[int, tuple[int, bool]] = {}  # child key → (ref, natural)
+            for m in mem:
+                for q in lanes[m].successors:
+                    key = int(group[q]) if change else int(q)
+                    nq = natural and m == r
+                    if key not in succ or (nq and not succ[key][1]):
+                        succ[key] = (int(q), nq)
+            for q, nq in succ.values():
+                ref.append(q)
+                nat.append(nq)
+            ptr.append(len(ref))
+    return np.asarray(ptr, dtype=int), np.asarray(ref, dtype=int), np.asarray(nat, dtype=bool)
+
+
+def _trees(world: World, group: np.ndarray, dlat: np.ndarray, exact: np.ndarray, root_s: np.ndarray, change: bool,
+           limits: np.ndarray, lines: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+           lane_kappa: np.ndarray) -> LaneTrees:
+    """Every lane's tree, grown breadth first for all lanes at once (one pass per depth): a node
+    is expanded while its end lies within :data:`REACH` and its tree has fewer than
+    :data:`MAX_NODES` nodes when the breadth-first queue reaches it."""
+    n = len(world.lanes.lanes)
+    length = world.lanes.length
+    tab = _ref_tables(world, group, dlat, exact, root_s, change, limits, lines, lane_kappa)
+    cptr, cref, cnat = _children(world, group, dlat, change)
+    # one level: tree, ref, natural flag, offset, parent and position within the tree
+    tree, ref, nat = np.arange(n), np.arange(n), np.ones(n, dtype=bool)
+    off, parent, pos = np.zeros(n), np.full(n, -1), np.zeros(n, dtype=int)
+    count = np.ones(n, dtype=int)  # nodes in each tree so far
+    extent = np.full(n, np.inf)
+    levels = []
+    depth = 0
+    while len(tree):
+        levels.append((tree, ref, nat, off, parent, pos, np.full(len(tree), depth)))
+        end = off + length[ref]
+        row = 2 * ref + nat
+        kids = np.where(end < REACH, cptr[row + 1] - cptr[row], 0)
+        # nodes of the same tree are contiguous and in queue order: the count when each is reached
+        first = np.flatnonzero(np.r_[True, tree[1:] != tree[:-1]])
+        run = np.cumsum(kids) - kids
+        before = count[tree] + run - np.repeat(run[first], np.diff(np.r_[first, len(tree)]))
+        grow = (end < REACH) & (before < MAX_NODES)
+        cut = ~grow & ~tab["leaf"][ref]
+        np.minimum.at(extent, tree[cut], end[cut])
+        kids = np.where(grow, kids, 0)
+        np.add.at(count, tree, kids)
+        k = np.repeat(np.arange(len(tree)), kids)
+        at = np.arange(len(k)) - np.repeat(np.cumsum(kids) - kids, kids)
+        child = cptr[row[k]] + at
+        tree, ref, nat, off, parent, pos = tree[k], cref[child], cnat[child], end[k], pos[k], before[k] + at
+        depth += 1
+    cat = [np.concatenate(c) for c in zip(*levels)]
+    order = np.lexsort((cat[5], cat[0]))  # by tree, then position: each tree's nodes in queue order
+    tree, ref, nat, off, parent, _, dep = (c[order] for c in cat)
+    ptr = np.searchsorted(tree, np.arange(n + 1))
+    per_tree = lambda name, how: how.reduceat(tab[name][ref], ptr[:-1])  # noqa: E731 - every tree has its root
+    line_x = off[:, None, None] + tab["line_x"][ref]
+    return LaneTrees(ptr.astype(int), ref, np.where(nat, ref, -1), off, parent, dep, tab["leaf"][ref], tab["members"][ref],
+                     tab["dlat"][ref], tab["line"][ref], line_x, per_tree("limit", np.maximum),
+                     per_tree("stretch", np.maximum), per_tree("shrink", np.minimum), extent, tab["half"][ref],
+                     tab["own"][ref], tab["spread"][ref], tab["kappa"][ref])
 
 
 # ---------------------------------------------------------------------- conflict zones
