@@ -24,16 +24,16 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import replace
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from twolevel.diagnostics import Diagnostic, Span
 from twolevel.sim.codes import SIM630, SIM631
+from twolevel.sim.traffic_engine import BuiltinTraffic
 from twolevel.world import traffic as tr
-from twolevel.world.schema import SumoTraffic as SumoSpec
 from twolevel.world.participants import SLOT_PREFIX
+from twolevel.world.schema import SumoTraffic as SumoSpec
 from twolevel.world.world import World
 
 __all__ = ["SumoTraffic", "EGO_ID", "sumo_angle", "front_of"]
@@ -132,10 +132,8 @@ class SumoTraffic:
     def step(self, state: tr.TrafficState, dt: float, ego: tr.EgoBox, ego_next: tr.EgoBox) -> tr.TrafficState:
         """The scenario's own participants by the built-in traffic, then the ego moved to
         ``ego_next`` in SUMO, SUMO's step, and the vehicles near the ego into the slots."""
-        w = self.world
         if self.first:
-            state = tr.step(state, dt, lanes=w.lanes, parts=w.parts, limits=w.limits, lights=w.lights, stops=w.stops,
-                            ego=ego, stop_speed=w.settings.stop_speed)
+            state = BuiltinTraffic(self.world).step(state, dt, ego, ego_next)
         else:
             state = replace(state, t=state.t + dt)
         a = time.perf_counter()

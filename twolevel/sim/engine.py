@@ -112,7 +112,7 @@ from twolevel.sim.provenance import run_metadata
 from twolevel.sim.robustness import RuleColumns
 from twolevel.sim.summary import Collision, RunSummary, StepDecision, StepInfo, summarise
 from twolevel.sim.trace import BASE_COLUMNS, RunDirectory, RunStatus, TraceWriter
-from twolevel.sim.traffic_engine import BuiltinTraffic, TrafficEngine, traffic_engine
+from twolevel.sim.traffic_engine import BuiltinTraffic, TrafficEngine
 from twolevel.sim.unsatisfiable import UnsatisfiableLog
 from twolevel.stl.typecheck import RuleSet
 from twolevel.world import traffic as tr
@@ -327,6 +327,17 @@ class LoopStats:
         self.ttr.append(ttr)
 
 
+def _traffic_engine(world: World, scn: Scenario) -> tuple[TrafficEngine | None, list[Diagnostic]]:
+    """The engine of the scenario's ``traffic`` (the built-in one when it names none), started;
+    None and the diagnostics when it cannot start."""
+    spec = scn.spec.traffic
+    if spec is None:
+        return BuiltinTraffic(world), []
+    from twolevel.sim.cosim import SumoTraffic  # noqa: PLC0415 - libsumo only when asked for
+
+    return SumoTraffic.launch(world, spec, scn.path)
+
+
 class ClosedLoop:
     """One closed-loop run of a scenario: the world, the planner and the low level, and the
     records kept between steps."""
@@ -373,7 +384,7 @@ class ClosedLoop:
         diags += d
         if planner is None:
             return None, diags
-        traffic, d = traffic_engine(world, scn)
+        traffic, d = _traffic_engine(world, scn)
         diags += d
         if traffic is None:
             return None, diags

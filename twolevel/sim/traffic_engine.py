@@ -3,7 +3,8 @@
 :class:`BuiltinTraffic` is the embedded default (:func:`twolevel.world.traffic.step`: IDM,
 constant velocity, scripts, lights). A scenario's ``traffic: {engine: sumo, …}`` adds SUMO's
 vehicles through libsumo (:class:`twolevel.sim.cosim.SumoTraffic`), which fill the world's
-engine slots (:data:`twolevel.world.participants.SLOT_PREFIX`) each step.
+engine slots (:data:`twolevel.world.participants.SLOT_PREFIX`) each step; the closed loop
+(:mod:`twolevel.sim.engine`) starts the scenario's.
 """
 
 from __future__ import annotations
@@ -11,12 +12,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Protocol
 
-from twolevel.diagnostics import Diagnostic
 from twolevel.world import traffic as tr
-from twolevel.world.loader import Scenario
 from twolevel.world.world import World
 
-__all__ = ["TrafficEngine", "BuiltinTraffic", "traffic_engine"]
+__all__ = ["TrafficEngine", "BuiltinTraffic"]
 
 
 class TrafficEngine(Protocol):
@@ -53,13 +52,3 @@ class BuiltinTraffic:
     def close(self) -> None:
         return None
 
-
-def traffic_engine(world: World, scn: Scenario) -> tuple[TrafficEngine | None, list[Diagnostic]]:
-    """The engine of the scenario's ``traffic`` (the built-in one when it names none), started;
-    None and the diagnostics when it cannot start."""
-    spec = scn.spec.traffic
-    if spec is None:
-        return BuiltinTraffic(world), []
-    from twolevel.sim.cosim import SumoTraffic  # noqa: PLC0415 - libsumo only when asked for
-
-    return SumoTraffic.launch(world, spec, scn.path)
