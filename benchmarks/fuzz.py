@@ -2,15 +2,22 @@
 
     python benchmarks/fuzz.py                          # every target, 500 inputs each
     python benchmarks/fuzz.py --target rules --inputs 100000 --seed 3 --keep fuzz-failures
-    python benchmarks/fuzz.py --target world --inputs 20000 --run-every 20
+    python benchmarks/fuzz.py --target world --inputs 20000 --run-every 20 --jobs 2 --out world.json
+    python benchmarks/fuzz.py --target rules=40000 --target traces=45000 --target world=15000 --out fuzz.json
 
-One function per target returns a :class:`Tally`; the table prints, per target: inputs, inputs
-answered with diagnostics (refused), accepted, internal errors, NaN states, inconsistent results
-(positions outside the input, findings or verdicts that change with the formatting, a printed rule
-file that parses back differently), and hangs (an input whose stages took more than 10 s; one still
-running after ``--timeout`` seconds is stopped and counted). Every broken input is printed (and,
-with ``--keep DIR``, written there to reproduce). The invariant: a diagnostic or a valid result,
-never an internal error, a NaN state or a hang. Deterministic for a seed.
+The campaign (:mod:`twolevel.fuzz.campaign`) runs ``--jobs`` worker processes; input ``i`` of a
+target depends only on (``--seed``, the target, ``i``), and results are counted in input order, so
+the table is the same for a seed whatever ``--jobs``. The table prints, per target: inputs,
+inputs answered with diagnostics (refused), accepted, accepted inputs also planned and simulated
+(ran), internal errors (a worker that died included), NaN states, inconsistent results (positions
+outside the input, findings or verdicts that change with the formatting, a printed rule file that
+parses back differently), hangs (an input whose stages took more than 10 s; one still running after
+``--timeout`` seconds is stopped — by an alarm, or by killing its worker — and counted), seconds,
+inputs per second and the 1-minute load average at the target's start and end. Every broken input
+is printed (and, with ``--keep DIR``, written there to reproduce). With ``--out FILE`` the tally
+is written to that JSON file (atomically, every few seconds and at the end), so an interrupted
+campaign (Ctrl-C, SIGTERM, SIGHUP: exit 128 + the signal's number) leaves its partial tally there.
+The invariant: a diagnostic or a valid result, never an internal error, a NaN state or a hang.
 
 Targets:
 - ``rules``: rule-file text (:mod:`twolevel.fuzz.rules`): files written from the grammar and
@@ -20,174 +27,86 @@ Targets:
   in ``--variants`` other formats (which must give the same verdicts) and once mangled.
 - ``world``: maps and scenarios (:mod:`twolevel.fuzz.world`): the shipped scenarios and
   tests/world/fuzz_seeds/ mutated field-wise; ``check`` on each, and for what it accepts loading
-  and the built world, and (every ``--run-every``-th) ``plan`` and ``simulate --duration 2`` with
-  no NaN in any vehicle's state ("ran" counts those).
+  and the built world, and (one in ``--run-every``, drawn per input) ``plan`` and
+  ``simulate --duration 2`` with no NaN in any vehicle's state ("ran" counts those).
 """
 
 from __future__ import annotations
 
 import argparse
-import random
 import signal
 import sys
-import tempfile
-import time
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 REPO = Path(__file__).resolve().parents[1]
-HANG_S = 10.0  # [s] an input taking longer than this counts as a hang
 
 
-@dataclass
-class Tally:
-    """Counts of one target's campaign and the inputs that broke the invariant."""
+def _target(text: str) -> tuple[str, int | None]:
+    name, _, count = text.partition("=")
+    from twolevel.fuzz.campaign import TARGETS
 
-    inputs: int = 0
-    refused: int = 0
-    accepted: int = 0
-    internal: int = 0
-    nan_state: int = 0
-    inconsistent: int = 0
-    hangs: int = 0
-    ran: int = 0  # accepted inputs also planned and simulated
-    seconds: float = 0.0
-    broken: list[str] = field(default_factory=list)
+    if name not in TARGETS:
+        raise argparse.ArgumentTypeError(f"unknown target {name!r} (choose from {', '.join(sorted(TARGETS))})")
+    return name, int(count) if count else None
 
 
-class _Timeout(Exception):
-    pass
+def _table(tallies: list) -> str:
+    from twolevel.fuzz.campaign import HANG_S
+
+    head = ("target", "inputs", "refused", "accepted", "ran", "internal", "nan-state", "inconsistent",
+            f"hangs>{HANG_S:g}s", "seconds", "inputs/s", "load")
+    rows = [" ".join(f"{h:>12}" for h in head)]
+    for t in tallies:
+        cells = (t.target, f"{t.inputs}/{t.requested}" if t.inputs < t.requested else t.inputs, t.refused,
+                 t.accepted, t.ran, t.internal, t.nan_state, t.inconsistent, t.hangs, f"{t.seconds:.0f}",
+                 f"{t.inputs / t.seconds:.1f}" if t.seconds else "-", f"{t.load[0]:.1f}→{t.load[1]:.1f}")
+        rows.append(" ".join(f"{c:>12}" for c in cells))
+    total = sum(t.inputs for t in tallies)
+    rows.append(f"{'total':>12} {total:>12}")
+    return "\n".join(rows)
 
 
-def _alarm(signum: int, frame: object) -> None:
-    raise _Timeout()
-
-
-def _campaign(name: str, inputs: int, seed: int, timeout: float, keep: Path | None,
-              one: Callable[[random.Random], tuple[object, str, str]]) -> Tally:
-    """Run ``one`` (input → outcome verdict, detail, the input as text) on ``inputs`` draws."""
-    from twolevel.fuzz.rules import ACCEPTED, INCONSISTENT, INTERNAL, NAN_STATE, REFUSED
-    from twolevel.fuzz.world import NAN_STATE as WORLD_NAN_STATE
-
-    tally = Tally()
-    start = time.perf_counter()
-    signal.signal(signal.SIGALRM, _alarm)
-    for i in range(inputs):
-        rnd = random.Random(f"{seed}:{i}")
-        text = ""
-        t0 = time.perf_counter()
-        signal.setitimer(signal.ITIMER_REAL, timeout)
-        try:
-            verdict, detail, text = one(rnd)  # type: ignore[assignment]
-        except _Timeout:
-            verdict, detail = "hang", f"still running after {timeout:g} s"
-        finally:
-            signal.setitimer(signal.ITIMER_REAL, 0)
-        took = time.perf_counter() - t0
-        tally.inputs += 1
-        tally.refused += verdict == REFUSED
-        tally.accepted += verdict == ACCEPTED
-        tally.internal += verdict == INTERNAL
-        tally.nan_state += verdict in (NAN_STATE, WORLD_NAN_STATE)
-        tally.inconsistent += verdict == INCONSISTENT
-        hang = verdict == "hang" or took > HANG_S
-        tally.hangs += hang
-        if verdict not in (REFUSED, ACCEPTED) or hang:
-            line = f"{name} #{i} (seed {seed}): {verdict}, {took:.1f} s: {text[:300]!r}\n    {detail}"
-            tally.broken.append(line)
-            print(line, flush=True)
-            if keep is not None:
-                (keep / f"{name}-{seed}-{i}.txt").write_text(f"{text}\n\n{detail}\n", encoding="utf-8")
-    tally.seconds = time.perf_counter() - start
-    return tally
-
-
-def fuzz_rules(inputs: int, seed: int, *, timeout: float = 120.0, keep: Path | None = None) -> Tally:
-    """Rule-file text: ``inputs`` generated files, each checked under LF, CRLF and CR, rendered,
-    printed back and (when accepted) monitored."""
-    from twolevel.fuzz.rules import generate, probe
-
-    def one(rnd: random.Random) -> tuple[str, str, str]:
-        text = generate(rnd)
-        out = probe(text, dt=rnd.choice([None, 0.1]), horizon=rnd.choice([None, 10]), seed=rnd.randrange(10**6))
-        return out.verdict, out.detail, text
-
-    return _campaign("rules", inputs, seed, timeout, keep, one)
-
-
-def fuzz_traces(inputs: int, seed: int, *, timeout: float = 120.0, keep: Path | None = None,
-                variants: int = 3) -> Tally:
-    """Trace CSVs: ``inputs`` generated drives, each monitored plainly, in ``variants`` other
-    formats and once mangled."""
-    from twolevel.fuzz.traces import PLAIN, generate, probe, write
-
-    def one(rnd: random.Random) -> tuple[str, str, str]:
-        case = generate(rnd)
-        out = probe(case, variants=variants, seed=rnd.randrange(10**6))
-        text = write(case, PLAIN, random.Random(0)).decode() + "\n" + case.rules
-        return out.verdict, out.detail, text
-
-    return _campaign("traces", inputs, seed, timeout, keep, one)
-
-
-def fuzz_world(inputs: int, seed: int, *, timeout: float = 120.0, keep: Path | None = None,
-               run_every: int = 1) -> Tally:
-    """Maps and scenarios: ``inputs`` mutated seeds, each checked; what check accepts is loaded
-    and built, and every ``run_every``-th of those planned and simulated for 2 s."""
-    from twolevel.fuzz.mutation import dump
-    from twolevel.fuzz.world import ACCEPTED, generate, load_seed, probe, shipped_seeds, write_case
-
-    seeds = shipped_seeds(REPO) + [load_seed(REPO / "tests/world/fuzz_seeds/scenario.yaml")]
-    accepted = [0]
-
-    def one(rnd: random.Random) -> tuple[str, str, str]:
-        case = generate(rnd.choice(seeds), rnd)
-        text = f"# {case}\n# scenarios/s.yaml\n{dump(case.scenario)}# maps/m.yaml\n{dump(case.map)}"
-        with tempfile.TemporaryDirectory() as d:
-            scenario = write_case(case, d)
-            out = probe(scenario, run=False)
-            if out.verdict == ACCEPTED:
-                accepted[0] += 1
-                if accepted[0] % run_every == 0:
-                    out = probe(scenario, run=True, solver=rnd.choice(["modes", "highs"]))
-        return out.verdict, out.detail, text
-
-    tally = _campaign("world", inputs, seed, timeout, keep, one)
-    tally.ran = accepted[0] // run_every
-    return tally
-
-
-TARGETS: dict[str, Callable[..., Tally]] = {"rules": fuzz_rules, "traces": fuzz_traces, "world": fuzz_world}
+def _raise(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt(signum)
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--target", choices=sorted(TARGETS), action="append", help="a target (default: all)")
-    ap.add_argument("--inputs", type=int, default=500, help="inputs per target")
+    ap.add_argument("--target", type=_target, action="append", metavar="NAME[=INPUTS]",
+                    help="a target, with its own number of inputs (default: every target)")
+    ap.add_argument("--inputs", type=int, default=500, help="inputs per target (unless given with it)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--jobs", type=int, default=1, metavar="N", help="worker processes")
     ap.add_argument("--variants", type=int, default=3, metavar="N", help="traces: other formats per drive")
     ap.add_argument("--run-every", type=int, default=1, metavar="N",
-                    help="world: plan and simulate every N-th accepted input (1: all)")
+                    help="world: plan and simulate one accepted input in N (1: all)")
     ap.add_argument("--timeout", type=float, default=120.0, metavar="SECONDS", help="stop an input after this long")
+    ap.add_argument("--out", type=Path, metavar="FILE", help="write the tally (JSON) there as it grows")
     ap.add_argument("--keep", type=Path, metavar="DIR", help="write every broken input into DIR")
     args = ap.parse_args()
+    from twolevel.fuzz.campaign import TARGETS, Campaign, run_campaign
+
     if args.keep is not None:
         args.keep.mkdir(parents=True, exist_ok=True)
-    rows = []
-    for name in args.target or sorted(TARGETS):
-        kwargs = {"traces": {"variants": args.variants}, "world": {"run_every": args.run_every}}.get(name, {})
-        t = TARGETS[name](args.inputs, args.seed, timeout=args.timeout, keep=args.keep, **kwargs)
-        rows.append((name, t))
-    head = ("target", "inputs", "refused", "accepted", "ran", "internal", "nan-state", "inconsistent",
-            f"hangs>{HANG_S:g}s", "inputs/s")
-    print(" ".join(f"{h:>12}" for h in head))
-    for name, t in rows:
-        cells = (name, t.inputs, t.refused, t.accepted, t.ran, t.internal, t.nan_state, t.inconsistent, t.hangs,
-                 f"{t.inputs / t.seconds:.1f}" if t.seconds else "-")
-        print(" ".join(f"{c:>12}" for c in cells))
-    if any(t.broken for _, t in rows):
-        sys.exit(1)
+    campaign = Campaign(seed=args.seed, jobs=args.jobs, timeout=args.timeout, out=args.out, keep=args.keep,
+                        options={"root": str(REPO), "variants": args.variants, "run_every": args.run_every},
+                        report=lambda line: print(line, flush=True))
+    for sig in (signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, _raise)
+    code = 0
+    try:
+        for name, count in args.target or [(n, None) for n in sorted(TARGETS)]:
+            run_campaign(name, args.inputs if count is None else count, campaign)
+        campaign.status = "complete"
+    except KeyboardInterrupt as exc:
+        campaign.status = "interrupted"
+        code = 128 + (exc.args[0] if exc.args and isinstance(exc.args[0], int) else signal.SIGINT)
+    campaign.write()
+    print(_table(campaign.tallies), flush=True)
+    if campaign.status == "interrupted":
+        print(f"interrupted: the tally above is partial{f' (also in {args.out})' if args.out else ''}",
+              file=sys.stderr)
+    sys.exit(code or (1 if any(t.broken for t in campaign.tallies) else 0))
 
 
 if __name__ == "__main__":

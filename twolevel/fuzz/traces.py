@@ -172,52 +172,57 @@ def _verdicts(res: object) -> tuple[object, ...]:
     return rules, tuple(sorted(d.code for d in res.diagnostics)), res.violated  # type: ignore[attr-defined]
 
 
-def probe(case: Case, *, variants: int = 3, seed: int = 0) -> Outcome:
+def probe(case: Case, *, variants: int = 3, seed: int = 0, folder: str | None = None) -> Outcome:
     """Monitor ``case`` written plainly, in ``variants`` other styles and once mangled (drawn with
-    ``seed``), and hold the results to the invariant (module docstring)."""
+    ``seed``), and hold the results to the invariant (module docstring). The files are written
+    into ``folder`` (created if needed, files of an earlier probe replaced), else into a
+    temporary folder."""
     try:
-        return _probe(case, variants, random.Random(seed))
+        if folder is not None:
+            os.makedirs(folder, exist_ok=True)
+            return _probe(case, variants, random.Random(seed), folder)
+        with tempfile.TemporaryDirectory() as d:
+            return _probe(case, variants, random.Random(seed), d)
     except Exception:  # noqa: BLE001 - an exception anywhere is what this looks for
         return Outcome(INTERNAL, traceback.format_exc(limit=-3))
 
 
-def _probe(case: Case, variants: int, rnd: random.Random) -> Outcome:
+def _probe(case: Case, variants: int, rnd: random.Random, d: str) -> Outcome:
     from twolevel import pipeline
 
-    with tempfile.TemporaryDirectory() as d:
-        rules = os.path.join(d, "rules.stl")
-        with open(rules, "w", encoding="utf-8") as fh:
-            fh.write(case.rules)
+    rules = os.path.join(d, "rules.stl")
+    with open(rules, "w", encoding="utf-8") as fh:
+        fh.write(case.rules)
 
-        def monitor(data: bytes, name: str) -> object:
-            path = os.path.join(d, name)
-            with open(path, "wb") as fh:
-                fh.write(data)
-            return pipeline.monitor(rules, path, series=True)
+    def monitor(data: bytes, name: str) -> object:
+        path = os.path.join(d, name)
+        with open(path, "wb") as fh:
+            fh.write(data)
+        return pipeline.monitor(rules, path, series=True)
 
-        plain = write(case, PLAIN, rnd)
-        first = monitor(plain, "plain.csv")
-        where = outside(plain.decode("utf-8"), first.diagnostics, ".csv")  # type: ignore[attr-defined]
-        if where:
-            return Outcome(INCONSISTENT, where)
-        broken = broken_verdict(first.report)  # type: ignore[attr-defined]
-        if broken:
-            return broken
-        expected = _verdicts(first)
-        for k in range(variants):
-            style = restyle(case, rnd)
-            data = write(case, style, rnd)
-            other = monitor(data, f"v{k}.csv")
-            if _verdicts(other) != expected:
-                return Outcome(INCONSISTENT, f"{style} changed the result:\n{_verdicts(other)}\ninstead of\n"
-                                             f"{expected}\n{data!r}")
-        mangled = mangle(plain, rnd)
-        res = monitor(mangled, "mangled.csv")
-        where = outside(mangled.decode("utf-8-sig", errors="replace"), res.diagnostics, ".csv")  # type: ignore[attr-defined]
-        if where:
-            return Outcome(INCONSISTENT, f"{where}: {mangled!r}")
-        broken = broken_verdict(res.report)  # type: ignore[attr-defined]
-        if broken:
-            return broken
+    plain = write(case, PLAIN, rnd)
+    first = monitor(plain, "plain.csv")
+    where = outside(plain.decode("utf-8"), first.diagnostics, ".csv")  # type: ignore[attr-defined]
+    if where:
+        return Outcome(INCONSISTENT, where)
+    broken = broken_verdict(first.report)  # type: ignore[attr-defined]
+    if broken:
+        return broken
+    expected = _verdicts(first)
+    for k in range(variants):
+        style = restyle(case, rnd)
+        data = write(case, style, rnd)
+        other = monitor(data, f"v{k}.csv")
+        if _verdicts(other) != expected:
+            return Outcome(INCONSISTENT, f"{style} changed the result:\n{_verdicts(other)}\ninstead of\n"
+                                         f"{expected}\n{data!r}")
+    mangled = mangle(plain, rnd)
+    res = monitor(mangled, "mangled.csv")
+    where = outside(mangled.decode("utf-8-sig", errors="replace"), res.diagnostics, ".csv")  # type: ignore[attr-defined]
+    if where:
+        return Outcome(INCONSISTENT, f"{where}: {mangled!r}")
+    broken = broken_verdict(res.report)  # type: ignore[attr-defined]
+    if broken:
+        return broken
     codes = tuple(sorted(d.code for d in first.diagnostics))  # type: ignore[attr-defined]
     return Outcome(REFUSED if any(d.is_error for d in first.diagnostics) else ACCEPTED, "", codes)  # type: ignore[attr-defined]

@@ -21,6 +21,7 @@ The lark parser is built once per process, from lark's on-disk cache when availa
 
 from __future__ import annotations
 
+import functools
 import math
 import re
 from dataclasses import replace
@@ -90,6 +91,9 @@ def _parser() -> "Lark":
             maybe_placeholders=False,
             cache=True,
         )
+        # Lark.lex() builds a new lexer (and its scanner's regular expressions) on every call
+        # unless the instance holds one: build it once (a third of a small file's parse time)
+        _LARK.lexer = _LARK._build_lexer()
     return _LARK
 
 
@@ -617,8 +621,23 @@ def parse(text: str, file: str) -> tuple[RuleFile | None, list[Diagnostic]]:
     """Parse rule-file ``text`` (``file`` names it in spans). ``None`` when any error was found.
 
     Lines end at LF, CRLF or a bare CR (:data:`twolevel.diagnostics.LINE_BREAK`): the text is
-    read with each of them as ``\\n``, so positions are those an editor shows."""
-    text = LINE_BREAK.sub("\n", text)
+    read with each of them as ``\\n``, so positions are those an editor shows.
+
+    The result is a function of (the text with ``\\n`` line breaks, ``file``) and immutable,
+    so the last few are kept: loading a scenario reads its rule files once for the names, once
+    for the rules and again per parameter corner ``check`` tries; a tree of scenarios shares the
+    same rule files."""
+    rf, diags = _parse_cached(LINE_BREAK.sub("\n", text), file)
+    return rf, list(diags)
+
+
+@functools.lru_cache(maxsize=64)
+def _parse_cached(text: str, file: str) -> tuple[RuleFile | None, tuple[Diagnostic, ...]]:
+    rf, diags = _parse(text, file)
+    return rf, tuple(diags)
+
+
+def _parse(text: str, file: str) -> tuple[RuleFile | None, list[Diagnostic]]:
     pre = _scan_nesting(text, file)
     if pre is not None:
         return None, [pre]

@@ -11,6 +11,8 @@ Imported by ``twolevel check``: standard library and PyYAML only.
 
 from __future__ import annotations
 
+import copy
+import functools
 import os
 import re
 from dataclasses import dataclass, field
@@ -202,6 +204,25 @@ def read_document(path: str | os.PathLike[str]) -> tuple[Document | None, list[D
             return None, [YML402(f"file is {(refusal.size or 0) / 1e6:.1f} MB; the limit is {MAX_BYTES / 1e6:.1f} MB", whole,
                                  hint="maps and scenarios are small; generate traffic with 'populations' instead of listing it")]
         return None, [YML401(f"cannot read {file}: {refusal.detail}", whole)]
+    data, where, diags = _from_bytes(file, raw)
+    if data is None:
+        return None, list(diags)
+    return Document(file, copy.deepcopy(data), dict(where)), []
+
+
+@functools.lru_cache(maxsize=16)
+def _from_bytes(file: str, raw: bytes) -> tuple[Any, dict[Path_, Where], tuple[Diagnostic, ...]]:
+    """The data and positions of the document ``raw`` read from ``file`` (None and the refusal).
+
+    A function of its arguments, so the last few are kept (loading a scenario reads it and its
+    map again per stage and per parameter corner ``check`` tries); callers get a copy of the
+    data, which they may change."""
+    doc, diags = _compose(file, raw)
+    return (None, {}, tuple(diags)) if doc is None else (doc.data, doc.where, ())
+
+
+def _compose(file: str, raw: bytes) -> tuple[Document | None, list[Diagnostic]]:
+    whole = Span.whole_file(file)
     nul = raw.find(b"\x00")
     if nul >= 0:
         line, col = _line_of_offset(raw, nul)
