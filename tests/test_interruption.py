@@ -56,6 +56,26 @@ def test_a_second_signal_while_deferred_raises_at_once(installed) -> None:
     assert err.value.signum == signal.SIGINT  # the one that raised
 
 
+def test_a_first_signal_raises_at_once_inside_prompt_even_when_deferred(installed) -> None:
+    with interruption.deferred():
+        with pytest.raises(interruption.Interrupted) as err:
+            with interruption.prompt():
+                os.kill(os.getpid(), signal.SIGTERM)
+                signal.pthread_sigmask(signal.SIG_BLOCK, [])
+                pytest.fail("the signal was held")
+        assert err.value.signum == signal.SIGTERM
+        with pytest.raises(interruption.Interrupted):  # recorded too: the next checkpoint raises again
+            interruption.checkpoint()
+        with pytest.raises(interruption.Interrupted):  # one received before the block raises at its start
+            with interruption.prompt():
+                pytest.fail("entered the block after a signal")
+    interruption.clear()
+    with interruption.deferred(), interruption.prompt(), interruption.shielded():
+        os.kill(os.getpid(), signal.SIGINT)  # a shield inside still holds it
+        signal.pthread_sigmask(signal.SIG_BLOCK, [])
+    assert interruption.received() == signal.SIGINT
+
+
 def test_nothing_raises_inside_a_shield(installed) -> None:
     with interruption.shielded():
         os.kill(os.getpid(), signal.SIGINT)

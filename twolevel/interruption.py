@@ -16,7 +16,9 @@ raised at the next one: a signal is never lost. A second signal while deferred r
 (the user insists: a phase that never reaches a checkpoint can still be stopped). Inside
 :func:`shielded` (writing the last rows and ``run.json``) no signal raises; it is recorded and
 the next checkpoint after the shield raises it. Outside both, an installed handler raises at
-once, as Python does for Ctrl-C.
+once, as Python does for Ctrl-C. Inside :func:`prompt` (within a deferred block: a phase with
+no safe point inside that may take long, such as building compiled functions, whose compiler
+runs in a subprocess) the first signal raises at once too: what the phase built is thrown away.
 
 Without :func:`install` (twolevel used as a library) Python's own handling is left alone and
 :func:`checkpoint` raises only for a signal this module recorded, i.e. never.
@@ -34,8 +36,8 @@ import threading
 from dataclasses import dataclass
 from typing import Iterator
 
-__all__ = ["Interrupted", "SIGNALS", "install", "deferred", "shielded", "checkpoint", "received", "clear",
-           "describe", "exit_code"]
+__all__ = ["Interrupted", "SIGNALS", "install", "deferred", "prompt", "shielded", "checkpoint", "received",
+           "clear", "describe", "exit_code"]
 
 SIGNALS: tuple[int, ...] = tuple(int(getattr(signal, n)) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n))
 """The signals handled alike: Ctrl-C, a polite kill (CI time-outs, ``docker stop``), a closed terminal."""
@@ -71,6 +73,7 @@ class _State:
     """The first signal received."""
     count: int = 0
     defer: int = 0
+    prompt: int = 0
     shield: int = 0
     installed: bool = False
 
@@ -83,7 +86,7 @@ def _handler(signum: int, frame: object) -> None:
     s.count += 1
     if s.signum is None:
         s.signum = signum
-    if s.shield or (s.defer and s.count == 1):
+    if s.shield or (s.defer and not s.prompt and s.count == 1):
         return
     raise Interrupted(signum)
 
@@ -113,6 +116,18 @@ def deferred() -> Iterator[None]:
         yield
     finally:
         _state.defer -= 1
+
+
+@contextlib.contextmanager
+def prompt() -> Iterator[None]:
+    """Within the block a signal raises at once, even inside :func:`deferred` (a signal that came
+    before the block raises at its start)."""
+    checkpoint()
+    _state.prompt += 1
+    try:
+        yield
+    finally:
+        _state.prompt -= 1
 
 
 @contextlib.contextmanager

@@ -57,7 +57,8 @@ written before ``run.json`` records the status. Only a killed process loses the 
 checked, ``run.json`` written) before the run's first action, so a crash at step 0 or an
 interruption while compiled functions are built is recorded. Interruptions
 (:mod:`twolevel.interruption`) stop the run at a checkpoint: between start-up phases and after
-each step; the closing writes are shielded.
+each step; while the compiled functions are built (a C compiler in a subprocess, no safe point
+inside) at once; the closing writes are shielded.
 
 **Rules no plan satisfies.** Each episode of steps in which the high level was infeasible is
 explained once (:mod:`twolevel.sim.unsatisfiable`): SIM618 and the summary's ``unsatisfiable``.
@@ -529,9 +530,9 @@ class ClosedLoop:
         state = LoopState(x, traffic0, Memory.fresh(w), float(w.route.local_coordinates(x[None, :2])[0][0]))
         keep = max([r.past for r in self.rules] + [self.planner.history_depth])
         out = Recorders(writer, frames, History(SIGNALS + self.extra.signals, keep))
-        self.low.warm_up(x)
-        interruption.checkpoint()
-        rollout(x, np.zeros((1, 1, 2)), dt, p)  # compile the plant step before timing anything
+        with interruption.prompt():  # minutes with a slow compiler, and nowhere to stop safely inside
+            self.low.warm_up(x)
+            rollout(x, np.zeros((1, 1, 2)), dt, p)  # compile the plant step before timing anything
         interruption.checkpoint()
         if self.safety:
             self.initial = self.low.start(x, state.traffic, 0.0, state.s_hint)
