@@ -641,7 +641,8 @@ def test_scenarios(
                 result = S.run_cases(cases, executor, runs_dir, keep_passed=keep_passed, on_result=finished)
         else:
             result = S.run_cases(cases, executor, runs_dir, keep_passed=keep_passed, on_result=finished)
-    S.write_cache(cache_file, result.results)
+    if result.interrupted is None:  # an interrupted suite would forget the failures of the cases not run
+        S.write_cache(cache_file, result.results)
     bad = [r for r in result.results if not r.passed]
     if bad:
         from rich.markup import escape
@@ -664,7 +665,24 @@ def test_scenarios(
         write_json_atomic(json_out, S.suite_json(result))
     if github if github is not None else os.environ.get("GITHUB_ACTIONS") == "true":
         _emit(S.annotations(result))
+    if result.interrupted is not None:
+        _exit_interrupted(result.interrupted, f"{len(result.results)} of {len(cases)} cases completed "
+                                              f"(the outputs hold those)")
     raise typer.Exit(EXIT_OK if result.passed else EXIT_FAIL)
+
+
+def _exit_interrupted(signum: int, what: str) -> None:
+    """End a campaign a signal stopped (its outputs written): one line, exit 128 + the signal."""
+    global _INTERRUPT_REPORTED
+    from twolevel import interruption
+
+    sys.stderr.write(f"twolevel: {interruption.describe(signum)}: {what}\n")
+    _INTERRUPT_REPORTED = True
+    raise typer.Exit(interruption.exit_code(signum))
+
+
+_INTERRUPT_REPORTED = False
+"""A command said itself how a signal ended it (``main`` adds nothing)."""
 
 
 def _campaign_scenario(scenario: str):  # noqa: ANN202
@@ -683,10 +701,15 @@ def _campaign_scenario(scenario: str):  # noqa: ANN202
 
 
 def _batch_runner(executor, runs_dir: str, keep_passed: bool):  # noqa: ANN001, ANN202
-    from twolevel.campaign.suite import run_cases
+    """Run a list of cases on ``executor``: their results in order, or ``SuiteInterrupted``
+    with those that completed."""
+    from twolevel.campaign.suite import SuiteInterrupted, run_cases
 
     def run(cases):  # noqa: ANN001, ANN202
-        return list(run_cases(cases, executor, runs_dir, keep_passed=keep_passed, frames=False).results)
+        suite = run_cases(cases, executor, runs_dir, keep_passed=keep_passed, frames=False)
+        if suite.interrupted is not None:
+            raise SuiteInterrupted(suite.interrupted, suite.results)
+        return list(suite.results)
 
     return run
 
@@ -729,14 +752,22 @@ def sweep(
     folder = Path(out or Path("runs") / f"sweep-{Path(scenario).stem}")
     cases = [Case(f"#{i + 1:04d}", scenario, p) for i, p in enumerate(points)]
     console = _console()
+    from twolevel.campaign.suite import SuiteInterrupted
+
+    interrupted = None
     with _campaign_executor(scheduler, jobs) as executor:
-        results = _batch_runner(executor, str(folder / "runs"), keep_passed)(cases)
+        try:
+            results = _batch_runner(executor, str(folder / "runs"), keep_passed)(cases)
+        except SuiteInterrupted as exc:
+            results, interrupted = list(exc.results), exc.signum
     rows = table_rows(results, folder, objective=obj.of)
     files = write_table(rows, folder)
     report = write_campaign_report(folder, rows, params, obj.text, title=f"sweep of {scenario}")
     failed = sum(1 for r in results if not r.passed)
     console.print(f"{len(results)} runs: {len(results) - failed} passed, {failed} did not; "
                   f"table: {files[0]}; report: {report}", markup=False)
+    if interrupted is not None:
+        _exit_interrupted(interrupted, f"{len(results)} of {len(cases)} runs completed (the table holds those)")
     raise typer.Exit(EXIT_OK if failed == 0 else EXIT_FAIL)
 
 
@@ -791,6 +822,9 @@ def falsify(
     report = write_campaign_report(folder, rows, scn.spec.parameters, obj.text, title=f"falsification of {scenario}",
                                    first=res.first)
     ce = res.counterexample
+    if res.interrupted is not None and ce is None:
+        _exit_interrupted(res.interrupted, f"{len(res.results)} simulations completed, no counterexample among "
+                                           f"them (the table and {F.SUMMARY_FILE} hold those)")
     if ce is None:
         best = summary["best"]
         console.print(f"no counterexample in {len(res.results)} simulations ({res.optimizer}); lowest {obj.text} "
@@ -810,7 +844,7 @@ def main() -> None:
     try:
         app()
     except SystemExit as exc:
-        if exc.code == 130:  # typer's silent exit for a KeyboardInterrupt: say which signal it was
+        if exc.code == 130 and not _INTERRUPT_REPORTED:  # typer's silent exit for a KeyboardInterrupt: say which signal it was
             signum = interruption.received()
             sys.stderr.write(f"twolevel: {interruption.describe(signum)}\n")
             sys.exit(interruption.exit_code(signum))

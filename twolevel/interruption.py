@@ -37,7 +37,7 @@ from dataclasses import dataclass
 from typing import Iterator
 
 __all__ = ["Interrupted", "SIGNALS", "install", "deferred", "prompt", "shielded", "checkpoint", "received",
-           "clear", "describe", "exit_code"]
+           "insisted", "clear", "describe", "exit_code"]
 
 SIGNALS: tuple[int, ...] = tuple(int(getattr(signal, n)) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n))
 """The signals handled alike: Ctrl-C, a polite kill (CI time-outs, ``docker stop``), a closed terminal."""
@@ -76,6 +76,7 @@ class _State:
     prompt: int = 0
     shield: int = 0
     installed: bool = False
+    deferring: bool = False
 
 
 _state = _State()
@@ -95,17 +96,26 @@ def _main_thread() -> bool:
     return threading.current_thread() is threading.main_thread()
 
 
-def install() -> bool:
+def install(*, deferring: bool = False) -> bool:
     """Handle :data:`SIGNALS` as described in the module docstring, for the rest of the
-    process (idempotent). False when it cannot be done (not the main thread)."""
-    if _state.installed:
-        return True
-    if not _main_thread():
-        return False
-    for sig in SIGNALS:
-        signal.signal(sig, _handler)
-    _state.installed = True
+    process (idempotent). ``deferring``: the whole process is a :func:`deferred` block (a
+    worker, whose parent forwards it one signal to stop at its next checkpoint, wherever it is
+    waiting meanwhile). False when it cannot be done (not the main thread)."""
+    if not _state.installed:
+        if not _main_thread():
+            return False
+        for sig in SIGNALS:
+            signal.signal(sig, _handler)
+        _state.installed = True
+    if deferring and not _state.deferring:
+        _state.deferring = True
+        _state.defer += 1
     return True
+
+
+def insisted() -> bool:
+    """More than one signal was received (the user insists: waiting politely should end)."""
+    return _state.count > 1
 
 
 @contextlib.contextmanager

@@ -21,9 +21,11 @@ from typing import Any, Mapping
 
 from twolevel.diagnostics import Diagnostic
 
-__all__ = ["Case", "CaseResult", "run_case", "write_concrete", "CONCRETE_FILE"]
+__all__ = ["Case", "CaseResult", "run_case", "write_concrete", "CONCRETE_FILE", "INTERRUPTED"]
 
 CONCRETE_FILE = "scenario.yaml"
+INTERRUPTED = "interrupted"
+"""The ``status`` of a case a signal stopped (the run's own status then, ``run.json`` says so)."""
 
 
 @dataclass(frozen=True)
@@ -131,10 +133,15 @@ def run_case(case: Case, run_dir: str, keep_passed: bool = False, frames: bool =
     """Run ``case`` into ``run_dir`` (its concrete scenario, trace, run.json with the verdict)
     and judge it. Never raises: a case that cannot be run is an ``error`` outcome with the
     reason in ``messages``."""
+    from twolevel import interruption
     from twolevel.sim.trace import RunStatus
 
     t0 = time.perf_counter()
     messages: list[str] = []
+    try:
+        interruption.checkpoint()  # a case taken after the campaign was interrupted is not started
+    except KeyboardInterrupt as exc:
+        return CaseResult(case, "error", INTERRUPTED, None, {}, (), None, 0.0, 0.0, (str(exc),))
     try:
         from twolevel.sim.engine import simulate_scenario
         from twolevel.verdict.judge import judge_run
@@ -148,9 +155,13 @@ def run_case(case: Case, run_dir: str, keep_passed: bool = False, frames: bool =
         run_s = time.perf_counter() - r0
         messages += [f"{d.span}: {d.code} [{d.severity.value}] {d.message}" for d in diags if d.is_error]
         if summary is None:
-            return CaseResult(case, "error", "invalid", None, {}, (), run_dir, run_s, time.perf_counter() - t0, tuple(messages))
-        verdict, diags = judge_run(run_dir, path)
+            status = INTERRUPTED if interruption.received() is not None else "invalid"  # SIM612: in start-up
+            return CaseResult(case, "error", status, None, {}, (), run_dir, run_s, time.perf_counter() - t0, tuple(messages))
+        with interruption.shielded():  # the run is written: its verdict too, whatever arrives now
+            verdict, diags = judge_run(run_dir, path)
         messages += [f"{d.span}: {d.code} [{d.severity.value}] {d.message}" for d in diags if d.is_error]
+    except KeyboardInterrupt as exc:  # while the concrete scenario was written: nothing ran
+        return CaseResult(case, "error", INTERRUPTED, None, {}, (), None, 0.0, time.perf_counter() - t0, (str(exc),))
     except Exception as exc:  # a worker must report, never die: the campaign goes on
         messages.append(f"internal error: {type(exc).__name__}: {exc}\n{traceback.format_exc()}")
         return CaseResult(case, "error", "crashed", None, {}, (), run_dir if os.path.isdir(run_dir) else None,

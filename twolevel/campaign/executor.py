@@ -10,6 +10,14 @@
 
 Tasks are module-level functions of picklable arguments, so results are the same wherever they
 run: a campaign's table does not depend on the executor.
+
+Interruptions (local): each worker leaves the terminal's process group (a Ctrl-C reaches only the
+parent) and handles SIGINT, SIGTERM and SIGHUP as one deferred request
+(:mod:`twolevel.interruption`). :meth:`LocalExecutor.interrupt` (the parent, on its signal)
+cancels what has not started, forwards the signal to every worker — a running simulation stops
+at its next checkpoint and records the interruption in its ``run.json``; a case taken after it
+ends at once — waits for them to exit (a second signal to the parent, or ``grace`` seconds, and
+they are killed) and leaves no process behind.
 """
 
 from __future__ import annotations
@@ -17,9 +25,11 @@ from __future__ import annotations
 import concurrent.futures as cf
 import multiprocessing
 import os
+import time
 from typing import Any, Callable
 
-__all__ = ["Executor", "make_executor", "pin_threads", "worker_threads", "THREAD_VARIABLES", "ExecutorError"]
+__all__ = ["Executor", "LocalExecutor", "make_executor", "pin_threads", "worker_threads", "THREAD_VARIABLES",
+           "ExecutorError"]
 
 #: Environment variables that size the BLAS and OpenMP thread pools.
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS",
@@ -45,6 +55,45 @@ def pin_threads() -> dict[str, str]:
     else:
         threadpool_limits(1)
     return {name: os.environ[name] for name in THREAD_VARIABLES}
+
+
+def _start_worker() -> None:
+    """A local worker's start: one BLAS thread, its own process group, signals deferred."""
+    from twolevel import interruption
+
+    pin_threads()
+    os.setpgid(0, 0)  # the terminal's Ctrl-C goes to the parent alone, which forwards it once
+    interruption.install(deferring=True)
+
+
+class LocalExecutor(cf.ProcessPoolExecutor):
+    """Worker processes on this machine (``spawn``), which an interruption stops cleanly."""
+
+    def __init__(self, workers: int) -> None:
+        super().__init__(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                         initializer=_start_worker)
+
+    def interrupt(self, signum: int, grace: float = 60.0) -> None:
+        """Stop on the signal ``signum``: cancel the cases not started, forward ``signum`` to
+        every worker and wait until they have exited (killing those still running after
+        ``grace`` [s] or a second signal to this process)."""
+        from twolevel import interruption
+
+        processes = list((self._processes or {}).values())  # the pool's own table of its workers
+        self.shutdown(wait=False, cancel_futures=True)
+        for p in processes:
+            if p.is_alive():
+                try:
+                    os.kill(p.pid, signum)
+                except ProcessLookupError:
+                    pass
+        deadline = time.monotonic() + grace
+        while any(p.is_alive() for p in processes) and time.monotonic() < deadline and not interruption.insisted():
+            time.sleep(0.05)
+        for p in processes:
+            if p.is_alive():
+                p.kill()
+            p.join(5)
 
 
 class _DaskExecutor(cf.Executor):
@@ -82,8 +131,7 @@ def make_executor(scheduler: str | None = None, workers: int | None = None) -> c
         raise ExecutorError(f"--jobs must be at least 1, got {workers}")
     from twolevel.sim.provenance import cpus  # the one count of usable cores
 
-    n = workers or cpus()
-    return cf.ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn"), initializer=pin_threads)
+    return LocalExecutor(workers or cpus())
 
 
 def worker_threads() -> dict[str, str | None]:

@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 import os
 import shutil
+import signal
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Protocol, Sequence
@@ -161,6 +162,8 @@ class FalsifyResult:
     values: tuple[float, ...]
     optimizer: str
     first: int | None
+    interrupted: int | None = None
+    """The signal that stopped the search (None: it ran to a counterexample or its budget)."""
 
     @property
     def counterexample(self) -> CaseResult | None:
@@ -177,32 +180,49 @@ def falsify(scenario: str, params: Mapping[str, Parameter], objective: Objective
             batch: int | None = None, on_batch: Callable[[int, list[CaseResult], list[float]], None] | None = None
             ) -> FalsifyResult:
     """Minimise ``objective`` over ``params`` of ``scenario`` with at most ``budget`` runs;
-    ``run_batch`` runs a list of cases (in parallel) and returns their results in order."""
+    ``run_batch`` runs a list of cases (in parallel) and returns their results in order; when it
+    raises :class:`~twolevel.campaign.suite.SuiteInterrupted` the search ends with the cases that
+    completed (``interrupted`` the signal)."""
+    from twolevel import interruption
+    from twolevel.campaign.suite import SuiteInterrupted
+
     search, used = make_search(optimizer, len(params), batch, seed)
     results: list[CaseResult] = []
     batches: list[int] = []
     values: list[float] = []
     first: int | None = None
+    interrupted: int | None = None
     generation = 0
-    while len(results) < budget and first is None:
+    while len(results) < budget and first is None and interrupted is None:
         generation += 1
-        points = search.ask()
-        take = points[: budget - len(results)]
-        cases = [Case(f"#{len(results) + i + 1:04d}", scenario, values_at(params, u)) for i, u in enumerate(take)]
-        got = run_batch(cases)
-        vals = [objective.of(r) for r in got]
-        for i, v in enumerate(vals):
-            if first is None and v < 0:
-                first = len(results) + i + 1
-        results += got
-        batches += [generation] * len(got)
-        values += vals
-        if len(take) == len(points):  # a partial last batch is not told (the optimiser expects whole ones)
-            finite = np.array([_BIG if math.isnan(v) else min(max(v, -_BIG), _BIG) for v in vals])
-            search.tell(points, finite)
-        if on_batch is not None:
-            on_batch(generation, got, vals)
-    return FalsifyResult(tuple(results), tuple(batches), tuple(values), used, first)
+        try:
+            points = search.ask()
+            take = points[: budget - len(results)]
+            cases = [Case(f"#{len(results) + i + 1:04d}", scenario, values_at(params, u)) for i, u in enumerate(take)]
+            got = run_batch(cases)
+        except SuiteInterrupted as exc:
+            got, interrupted = list(exc.results), exc.signum
+        except KeyboardInterrupt as exc:  # between batches: nothing was running
+            interrupted = getattr(exc, "signum", None) or interruption.received() or int(signal.SIGINT)
+            break
+        with interruption.shielded():  # the runs and their values stay in step whatever arrives now
+            vals = [objective.of(r) for r in got]
+            for i, v in enumerate(vals):
+                if first is None and v < 0:
+                    first = len(results) + i + 1
+            results += got
+            batches += [generation] * len(got)
+            values += vals
+        try:
+            interruption.checkpoint()  # a signal received in the shield
+            if len(take) == len(points) and interrupted is None:  # a partial batch is not told (the optimiser expects whole ones)
+                finite = np.array([_BIG if math.isnan(v) else min(max(v, -_BIG), _BIG) for v in vals])
+                search.tell(points, finite)
+            if on_batch is not None:
+                on_batch(generation, got, vals)
+        except KeyboardInterrupt as exc:
+            interrupted = interrupted or getattr(exc, "signum", None) or interruption.received() or int(signal.SIGINT)
+    return FalsifyResult(tuple(results), tuple(batches), tuple(values), used, first, interrupted)
 
 
 COUNTEREXAMPLE_FILE = "counterexample.yaml"
@@ -216,6 +236,7 @@ def record(result: FalsifyResult, objective: Objective, folder: str | os.PathLik
     with a copy of its run directory (``counterexample/``)."""
     from twolevel.atomic import write_json_atomic
     from twolevel.campaign.case import write_concrete
+    from twolevel.interruption import describe
     from twolevel.sim.summary import jsonable
 
     out = Path(folder)
@@ -223,6 +244,7 @@ def record(result: FalsifyResult, objective: Objective, folder: str | os.PathLik
     summary: dict[str, Any] = {
         "objective": objective.text, "optimizer": result.optimizer, "seed": seed, "simulations": len(result.results),
         "first_counterexample": result.first,
+        "interrupted": None if result.interrupted is None else describe(result.interrupted),
         "counterexample": None if result.counterexample is None else dict(result.counterexample.case.parameters),
         "best": None if best is None else {"parameters": dict(best.case.parameters),
                                            "objective": result.values[result.results.index(best)]},

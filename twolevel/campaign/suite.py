@@ -17,21 +17,34 @@ from __future__ import annotations
 import json
 import os
 import re
+import signal
 import time
 from concurrent.futures import Executor, Future, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
 
-from twolevel.campaign.case import Case, CaseResult, run_case
+from twolevel.campaign.case import INTERRUPTED, Case, CaseResult, run_case
 from twolevel.diagnostics import Diagnostic, Span
 
-__all__ = ["discover", "select", "order_failed_first", "run_cases", "SuiteResult", "junit_xml", "suite_json",
-           "annotations", "read_cache", "write_cache", "run_dir_name", "KeywordError"]
+__all__ = ["discover", "select", "order_failed_first", "run_cases", "SuiteResult", "SuiteInterrupted", "junit_xml",
+           "suite_json", "annotations", "read_cache", "write_cache", "run_dir_name", "KeywordError"]
 
 
 class KeywordError(ValueError):
     """A ``-k`` expression that cannot be read."""
+
+
+class SuiteInterrupted(KeyboardInterrupt):
+    """A batch of cases a signal stopped: ``results`` are the cases that completed (in case
+    order), ``signum`` the signal (raised by runners that return lists, such as a search's)."""
+
+    def __init__(self, signum: int, results: Sequence[CaseResult]) -> None:
+        from twolevel.interruption import describe
+
+        super().__init__(describe(signum))
+        self.signum = signum
+        self.results = tuple(results)
 
 
 @dataclass(frozen=True)
@@ -40,6 +53,9 @@ class SuiteResult:
 
     results: tuple[CaseResult, ...]
     wall_s: float
+    interrupted: int | None = None
+    """The signal that stopped the suite (None: it ran to the end); ``results`` then holds the
+    cases that completed, in case order."""
 
     @property
     def counts(self) -> dict[str, int]:
@@ -190,14 +206,19 @@ def run_cases(cases: Sequence[Case], executor: Executor, runs_dir: str | os.Path
               keep_passed: bool = False, frames: bool = True,
               on_result: Callable[[CaseResult], None] | None = None) -> SuiteResult:
     """Run every case on ``executor`` (run directories ``runs_dir/<case>``) and collect the
-    results in case order; ``on_result`` is called as each case finishes (for a live view)."""
+    results in case order; ``on_result`` is called as each case finishes (for a live view).
+
+    A ``KeyboardInterrupt`` (Ctrl-C, or SIGTERM / SIGHUP under :mod:`twolevel.interruption`)
+    stops the suite: the cases not started are cancelled, the running ones stopped (the
+    executor's ``interrupt``, :class:`~twolevel.campaign.executor.LocalExecutor`; their run
+    directories say so), and the result holds the cases that completed, with the signal."""
+    from twolevel import interruption
+
     t0 = time.perf_counter()
     futures: dict[Future, int] = {}
-    for i, case in enumerate(cases):
-        run_dir = str(Path(runs_dir) / run_dir_name(case.id))
-        futures[executor.submit(run_case, case, run_dir, keep_passed, frames)] = i
     out: list[CaseResult | None] = [None] * len(cases)
-    for fut in as_completed(futures):
+
+    def collect(fut: Future) -> CaseResult:
         i = futures[fut]
         try:
             result = fut.result()
@@ -205,8 +226,29 @@ def run_cases(cases: Sequence[Case], executor: Executor, runs_dir: str | os.Path
             result = CaseResult(cases[i], "error", "crashed", None, {}, (), None, 0.0, 0.0,
                                 (f"the worker failed: {type(exc).__name__}: {exc}",))
         out[i] = result
-        if on_result is not None:
-            on_result(result)
+        return result
+
+    try:
+        for i, case in enumerate(cases):
+            run_dir = str(Path(runs_dir) / run_dir_name(case.id))
+            futures[executor.submit(run_case, case, run_dir, keep_passed, frames)] = i
+        for fut in as_completed(futures):
+            result = collect(fut)
+            if on_result is not None:
+                on_result(result)
+    except KeyboardInterrupt as exc:
+        signum = getattr(exc, "signum", None) or interruption.received() or signal.SIGINT
+        with interruption.shielded():  # stopping the workers; a second signal kills them instead
+            stop = getattr(executor, "interrupt", None)
+            if stop is not None:
+                stop(signum)
+            else:
+                executor.shutdown(wait=False, cancel_futures=True)
+            for fut in futures:
+                if out[futures[fut]] is None and fut.done() and not fut.cancelled():
+                    collect(fut)
+        done = tuple(r for r in out if r is not None and r.status != INTERRUPTED)
+        return SuiteResult(done, time.perf_counter() - t0, int(signum))
     return SuiteResult(tuple(r for r in out if r is not None), time.perf_counter() - t0)
 
 
