@@ -176,3 +176,16 @@ def test_numbers_are_ascii_digits_only(digits: str) -> None:
     assert rf is None
     bad = [d for d in diags if d.code == "STL102"]
     assert bad and bad[0].span.line == 2 and "ASCII digits" in (bad[0].hint or "")
+
+
+def test_a_text_parsed_again_gives_a_fresh_list_of_findings() -> None:
+    """Parses are kept by (text, file): what a caller does with the findings changes no later parse;
+    the same text under other line endings is the same parse."""
+    text = "input float v\nr = v >;\n"
+    _, diags = parse(text, "a.stl")
+    assert diags
+    diags.clear()
+    again, diags2 = parse(text, "a.stl")
+    assert again is None and diags2 and diags2[0].span.line == 2
+    assert parse(text.replace("\n", "\r"), "a.stl")[1] == diags2
+    assert parse(text, "b.stl")[1][0].span.file == "b.stl"

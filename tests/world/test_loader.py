@@ -281,3 +281,23 @@ def test_non_finite_rule_constant_is_refused_at_its_value(tmp_path: Path, value:
     assert "finite" in diags[0].message and diags[0].span.column == 22  # the value, not the key
     ok = write(tmp_path, "ok.yaml", SCENARIO.replace("rules: []", rules.replace(value, "0.5"), 1))
     assert load_scenario(ok)[1] == []
+
+
+def test_a_document_read_again_is_a_fresh_copy_and_follows_the_file(tmp_path: Path) -> None:
+    """Documents are kept by content (loading reads a scenario and its map again per stage):
+    changing one read's data changes no later read, and a changed file is read anew."""
+    from twolevel.world.document import read_document
+
+    path = tmp_path / "m.yaml"
+    path.write_text("a: {b: [1, 2]}\nc: &x [3]\nd: *x\n", encoding="utf-8")
+    first, _ = read_document(path)
+    assert first is not None
+    first.data["a"]["b"].append(99)
+    first.where.clear()
+    again, _ = read_document(path)
+    assert again is not None and again.data == {"a": {"b": [1, 2]}, "c": [3], "d": [3]} and again.where
+    path.write_text("a: 1\na: 2\n", encoding="utf-8")
+    refused, diags = read_document(path)
+    assert refused is None and diags and diags[0].code == "YML409"
+    diags.clear()
+    assert read_document(path)[1][0].code == "YML409"
