@@ -15,7 +15,7 @@ import enum
 import math
 import os
 import sys
-from typing import List, Optional
+from typing import List, NoReturn, Optional
 
 import typer
 
@@ -671,7 +671,7 @@ def test_scenarios(
     raise typer.Exit(EXIT_OK if result.passed else EXIT_FAIL)
 
 
-def _exit_interrupted(signum: int, what: str) -> None:
+def _exit_interrupted(signum: int, what: str) -> NoReturn:
     """End a campaign a signal stopped (its outputs written): one line, exit 128 + the signal."""
     global _INTERRUPT_REPORTED
     from twolevel import interruption
