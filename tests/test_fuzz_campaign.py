@@ -39,15 +39,17 @@ def test_the_tally_is_the_same_whatever_the_number_of_workers(tmp_path: Path, ta
 @pytest.mark.slow
 def test_hangs_and_dead_workers_are_counted_and_the_campaign_goes_on(tmp_path: Path) -> None:
     lines: list[str] = []
-    c = Campaign(seed=1, jobs=2, timeout=0.5, grace=1.0, scratch=tmp_path, report=lines.append,
-                 out=tmp_path / "tally.json")
-    tally = run_campaign("misbehaving", 12, c, target=misbehaving)
-    kinds = [random.Random(f"1:misbehaving:{i}").choice(KINDS) for i in range(12)]
-    assert {"sleeps", "stuck", "dies"} <= set(kinds)  # the seed exercises every way to misbehave
-    assert tally.inputs == 12
-    assert tally.accepted == kinds.count("ok")
-    assert tally.hangs == kinds.count("sleeps") + kinds.count("stuck")
+    c = Campaign(seed=4, jobs=2, timeout=1.0, grace=1.0, hang_s=0.3, scratch=tmp_path, report=lines.append,
+                 out=tmp_path / "tally.json", options={"slow_s": 0.5})
+    tally = run_campaign("misbehaving", 14, c, target=misbehaving)
+    kinds = [random.Random(f"4:misbehaving:{i}").choice(KINDS) for i in range(14)]
+    assert {"slow", "sleeps", "stuck", "dies"} <= set(kinds)  # the seed exercises every way to misbehave
+    assert tally.inputs == 14
+    assert tally.accepted == kinds.count("ok") + kinds.count("slow")
+    assert tally.hangs == kinds.count("slow") + kinds.count("sleeps") + kinds.count("stuck")
     assert tally.internal == kinds.count("dies")
+    slow = [ln for ln in lines if ": accepted," in ln]  # finished, but over the limit: shown with its input
+    assert len(slow) == kinds.count("slow") and all("'a slow input'" in ln for ln in slow)
     stopped = [ln for ln in lines if f": {HANG}," in ln]
     assert sum("stopped by the alarm" in ln for ln in stopped) == kinds.count("sleeps")
     assert sum("the worker was killed" in ln for ln in stopped) == kinds.count("stuck")
@@ -55,7 +57,7 @@ def test_hangs_and_dead_workers_are_counted_and_the_campaign_goes_on(tmp_path: P
     order = [int(ln.split("#")[1].split(" ")[0]) for ln in lines]
     assert order == sorted(order)  # reported in input order
     written = json.loads((tmp_path / "tally.json").read_text())
-    assert written["targets"][0]["inputs"] == 12 and written["targets"][0]["hangs"] == tally.hangs
+    assert written["targets"][0]["inputs"] == 14 and written["targets"][0]["hangs"] == tally.hangs
 
 
 @pytest.mark.slow

@@ -9,7 +9,8 @@ the same for a seed whatever the number of workers: results are merged in input 
 Each worker runs one input at a time. An input still running after ``timeout`` seconds is
 stopped by an alarm inside the worker; a worker that does not answer ``grace`` seconds later
 (stuck in compiled code that never returns to Python) is killed and replaced. Either way the
-input counts as a hang, as does any input that took longer than :data:`HANG_S`; a worker that
+input counts as a hang, as does any input that took longer than :data:`HANG_S` of wall time (the
+line printed for it gives its CPU time too: on a loaded machine the two differ); a worker that
 dies (a crash of the interpreter, the kernel's out-of-memory killer) counts its input as an
 internal error. With ``out``, the tally so far is written atomically to that JSON file every
 ``flush_s`` seconds and at the end (``status``: running, complete or interrupted), so an
@@ -26,7 +27,7 @@ import os
 import random
 import signal
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from multiprocessing.connection import Connection, wait
 from pathlib import Path
 from typing import Any, Callable
@@ -43,13 +44,14 @@ HANG, CRASH = "hang", "worker-died"
 @dataclass(frozen=True)
 class Probe:
     """One input's outcome: ``verdict`` ("refused", "accepted", or what broke the invariant),
-    ``detail``, the input as ``text`` (only needed when it broke) and whether it was also
-    planned and simulated (``ran``)."""
+    ``detail``, the input as ``text`` (sent back only when it broke the invariant or was slow),
+    whether it was also planned and simulated (``ran``) and the CPU time its probe took [s]."""
 
     verdict: str
     detail: str = ""
     text: str = ""
     ran: bool = False
+    cpu_s: float = 0.0
 
 
 Target = Callable[[dict[str, Any]], Callable[[random.Random], Probe]]
@@ -75,9 +77,9 @@ class Tally:
     load: tuple[float, float] = (0.0, 0.0)
     broken: list[str] = field(default_factory=list)
 
-    def add(self, i: int, seed: int, probe: Probe, took: float) -> str | None:
-        """Count input ``i``'s outcome (it took ``took`` [s]); the line describing it if it broke
-        the invariant."""
+    def add(self, i: int, seed: int, probe: Probe, took: float, hang_s: float = HANG_S) -> str | None:
+        """Count input ``i``'s outcome (it took ``took`` [s] of wall time; more than ``hang_s`` is a
+        hang); the line describing it if it broke the invariant."""
         from twolevel.fuzz.rules import ACCEPTED, INCONSISTENT, INTERNAL, NAN_STATE, REFUSED
         from twolevel.fuzz.world import NAN_STATE as WORLD_NAN_STATE
 
@@ -89,11 +91,12 @@ class Tally:
         self.nan_state += v in (NAN_STATE, WORLD_NAN_STATE)
         self.inconsistent += v == INCONSISTENT
         self.ran += probe.ran
-        hang = v == HANG or took > HANG_S
+        hang = v == HANG or took > hang_s
         self.hangs += hang
         if v in (REFUSED, ACCEPTED) and not hang:
             return None
-        line = f"{self.target} #{i} (seed {seed}): {v}, {took:.1f} s: {probe.text[:300]!r}\n    {probe.detail}"
+        line = (f"{self.target} #{i} (seed {seed}): {v}, {took:.1f} s ({probe.cpu_s:.1f} s CPU): "
+                f"{probe.text[:300]!r}\n    {probe.detail}")
         self.broken.append(line)
         return line
 
@@ -107,7 +110,7 @@ def _rules(options: dict[str, Any]) -> Callable[[random.Random], Probe]:
     def one(rnd: random.Random) -> Probe:
         text = generate(rnd)
         out = probe(text, dt=rnd.choice([None, 0.1]), horizon=rnd.choice([None, 10]), seed=rnd.randrange(10**6))
-        return Probe(out.verdict, out.detail, text if out.broken else "")
+        return Probe(out.verdict, out.detail, text)
 
     return one
 
@@ -121,7 +124,7 @@ def _traces(options: dict[str, Any]) -> Callable[[random.Random], Probe]:
     def one(rnd: random.Random) -> Probe:
         case = generate(rnd)
         out = probe(case, variants=variants, seed=rnd.randrange(10**6), folder=folder)
-        text = write(case, PLAIN, random.Random(0)).decode() + "\n" + case.rules if out.broken else ""
+        text = write(case, PLAIN, random.Random(0)).decode() + "\n" + case.rules
         return Probe(out.verdict, out.detail, text)
 
     return one
@@ -146,8 +149,7 @@ def _world(options: dict[str, Any]) -> Callable[[random.Random], Probe]:
         ran = out.verdict == ACCEPTED and run
         if ran:
             out = probe(scenario, run=True, solver=solver)
-        text = (f"# {case}\n# scenarios/s.yaml\n{dump(case.scenario)}# maps/m.yaml\n{dump(case.map)}"
-                if out.broken else "")
+        text = f"# {case}\n# scenarios/s.yaml\n{dump(case.scenario)}# maps/m.yaml\n{dump(case.map)}"
         return Probe(out.verdict, out.detail, text, ran)
 
     return one
@@ -175,10 +177,12 @@ def _alarm(signum: int, frame: object) -> None:
         raise _Alarm()
 
 
-def _worker(conn: Connection, name: str, target: Target, seed: int, timeout: float, options: dict[str, Any],
-            scratch: str) -> None:
-    """A worker's loop: receive an input's index, send back (index, probe, seconds); stop on None."""
+def _worker(conn: Connection, name: str, target: Target, seed: int, timeout: float, hang_s: float,
+            options: dict[str, Any], scratch: str) -> None:
+    """A worker's loop: receive an input's index, send back (index, probe, seconds); stop on None.
+    The input's text goes back only when it broke the invariant or took longer than ``hang_s``."""
     global _probing
+    from twolevel.fuzz.rules import ACCEPTED, REFUSED
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent stops the workers (a terminal's Ctrl-C reaches all)
     signal.signal(signal.SIGALRM, _alarm)
     devnull = os.open(os.devnull, os.O_WRONLY)
@@ -193,7 +197,7 @@ def _worker(conn: Connection, name: str, target: Target, seed: int, timeout: flo
         if i is None:
             return
         rnd = random.Random(f"{seed}:{name}:{i}")
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         signal.setitimer(signal.ITIMER_REAL, timeout)
         try:
             _probing = True
@@ -206,7 +210,9 @@ def _worker(conn: Connection, name: str, target: Target, seed: int, timeout: flo
         finally:
             _probing = False
             signal.setitimer(signal.ITIMER_REAL, 0)
-        conn.send((i, probe, time.perf_counter() - t0))
+        took = time.perf_counter() - t0
+        keep = probe.text if probe.verdict not in (REFUSED, ACCEPTED) or took > hang_s else ""
+        conn.send((i, replace(probe, text=keep, cpu_s=time.process_time() - c0), took))
 
 
 @dataclass
@@ -220,7 +226,7 @@ class _Slot:
 @dataclass
 class Campaign:
     """How a campaign runs: ``jobs`` worker processes, an input stopped after ``timeout`` [s]
-    (its worker killed ``grace`` [s] later), the tally written to ``out`` every ``flush_s`` [s],
+    (its worker killed ``grace`` [s] later; one taking more than ``hang_s`` [s] is a hang), the tally written to ``out`` every ``flush_s`` [s],
     broken inputs written into ``keep``, ``options`` for the targets (``root``: the repository,
     ``variants``, ``run_every``), ``scratch``: a folder for the workers' files."""
 
@@ -228,6 +234,7 @@ class Campaign:
     jobs: int = 1
     timeout: float = 120.0
     grace: float = 10.0
+    hang_s: float = HANG_S
     out: Path | None = None
     flush_s: float = 5.0
     keep: Path | None = None
@@ -244,7 +251,7 @@ class Campaign:
         from twolevel.atomic import write_json_atomic
 
         write_json_atomic(self.out, {
-            "status": self.status, "seed": self.seed, "jobs": self.jobs, "timeout": self.timeout, "hang_s": HANG_S,
+            "status": self.status, "seed": self.seed, "jobs": self.jobs, "timeout": self.timeout, "hang_s": self.hang_s,
             "options": {k: v for k, v in self.options.items() if k != "root"},
             "updated": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "targets": [asdict(t) for t in self.tallies],
         })
@@ -252,7 +259,7 @@ class Campaign:
 
 def _start(ctx: Any, name: str, target: Target, c: Campaign, scratch: str) -> _Slot:
     parent, child = ctx.Pipe()
-    p = ctx.Process(target=_worker, args=(child, name, target, c.seed, c.timeout, c.options, scratch), daemon=True)
+    p = ctx.Process(target=_worker, args=(child, name, target, c.seed, c.timeout, c.hang_s, c.options, scratch), daemon=True)
     p.start()
     child.close()
     return _Slot(p, parent)
@@ -321,7 +328,7 @@ def run_campaign(name: str, inputs: int, c: Campaign, target: Target | None = No
                 while tally.inputs in done:
                     i = tally.inputs
                     probe, took = done.pop(i)
-                    line = tally.add(i, c.seed, probe, took)
+                    line = tally.add(i, c.seed, probe, took, c.hang_s)
                     if line is not None:
                         c.report(line)
                         if c.keep is not None:
