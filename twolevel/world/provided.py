@@ -20,6 +20,12 @@ min_gap       m      oriented-box separation to the nearest vehicle within r_nea
 n_near        -      number of vehicles within r_near
 rss_gap       m      gap to the nearest vehicle ahead in the ego's lane within the sensing range,
                      beyond RSS's safe distance behind it (+inf if none)
+d_zone        m      route distance from the ego's front to the entry of its next conflict area at a
+                     junction (≤ 0 once in; +inf if none within r_near)
+d_zone_out    m      route distance the ego's rear still has to the exit of that area (> 0 until it
+                     has left; −inf if none): inside while d_zone ≤ 0 < d_zone_out
+t_zone        s      time to reach that area at the current speed (0 inside, +inf standing or none)
+t_zone_out    s      time to clear it at the current speed (+inf standing in or before it, 0 if none)
 ============  =====  ===============================================================
 
 **Participant signals** relate one other participant o to the ego; a rule reads them inside a
@@ -48,7 +54,15 @@ precedes      m      −inf      > 0 when o is the vehicle directly ahead in the
                                precedes): the least of in_same_lane(o), d_lon(o) and, for each other
                                vehicle q in that lane ahead of the ego, how far q's front is behind
                                o's rear
+t_reach       s      +inf      time for o to reach the ego's next conflict area at o's speed, along its
+                               lane (0 while in it; +inf when past it, standing, or on no lane
+                               that conflicts with the ego's)
+t_clear       s      0         time for o to clear that area at its speed (+inf standing in or before it)
+priority      1/0    0         1 when o goes before the ego there (arm priorities, a left turn gives
+                               way to oncoming traffic, lights)
 ============  =====  ========  =====================================================================
+
+The last three (and the ego's d_zone … t_zone_out) are :mod:`twolevel.world.right_of_way`'s.
 
 A participant is *present* at a sample when it is active and within ``r_near`` of the ego; the
 signal ``present[ID]`` (:data:`twolevel.stl.analysis.PRESENT`) is then +inf, else −inf, and its
@@ -70,14 +84,16 @@ from types import MappingProxyType
 from typing import Mapping
 
 SIGNALS: tuple[str, ...] = ("x", "y", "psi", "v", "a", "delta", "s", "e", "v_max", "d_stop", "light_red",
-                            "d_light", "d_lead", "v_lead", "min_gap", "n_near", "rss_gap")
+                            "d_light", "d_lead", "v_lead", "min_gap", "n_near", "rss_gap", "d_zone", "d_zone_out",
+                            "t_zone", "t_zone_out")
 """Every signal the world provides, in the order of the table above (the one list of their names:
 the simulator's history and trace columns follow this order)."""
 
 PROVIDED_SIGNALS: frozenset[str] = frozenset(SIGNALS)
 """The same names as a set (what the type checker accepts as a rule's inputs)."""
 
-PARTICIPANT_SIGNALS: tuple[str, ...] = ("v", "a", "d_lon", "d_lat", "in_same_lane", "cut_in", "precedes")
+PARTICIPANT_SIGNALS: tuple[str, ...] = ("v", "a", "d_lon", "d_lat", "in_same_lane", "cut_in", "precedes", "t_reach",
+                                        "t_clear", "priority")
 """Every participant signal the world provides, in the order of the table above."""
 
 PROVIDED_PARTICIPANT_SIGNALS: frozenset[str] = frozenset(PARTICIPANT_SIGNALS)
@@ -85,7 +101,7 @@ PROVIDED_PARTICIPANT_SIGNALS: frozenset[str] = frozenset(PARTICIPANT_SIGNALS)
 
 PARTICIPANT_ABSENT: Mapping[str, float] = MappingProxyType({
     "v": 0.0, "a": 0.0, "d_lon": math.inf, "d_lat": math.inf, "in_same_lane": -math.inf, "cut_in": -math.inf,
-    "precedes": -math.inf})
+    "precedes": -math.inf, "t_reach": math.inf, "t_clear": 0.0, "priority": 0.0})
 """Each participant signal's value where its participant is absent."""
 
 __all__ = ["SIGNALS", "PROVIDED_SIGNALS", "PARTICIPANT_SIGNALS", "PROVIDED_PARTICIPANT_SIGNALS",

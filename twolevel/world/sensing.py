@@ -26,6 +26,7 @@ import numpy as np
 from twolevel.models.obb import pose_separation
 from twolevel.stl.analysis import PRESENT, participant_key
 from twolevel.world.relations import acceleration, relations
+from twolevel.world.right_of_way import ZONE_PARTICIPANT_SIGNALS, participant_zone_signals, zone_signals
 from twolevel.world.signals import (PASS_MARGIN, STOP_ZONE, StopMemory, ahead_in_lane, rss_gap, sensing_window,
                                     update_stop_memory)
 from twolevel.world.traffic import RED, YELLOW, TrafficState
@@ -195,15 +196,16 @@ def sense(world: World, t0: float, dt: float, memory: Memory, others: Others, x:
     out["d_stop"] = _stop_distance(world, memory.stops, s, v, dt)
     out["light_red"], out["d_light"] = _light(world, memory, t0 + dt * np.arange(T), s, v)
     out.update(_lead_and_gap(world, others, x, y, psi, s, e, v))
+    out.update(zone_signals(world, s, v))
     if world.participant_signals and others.n:
-        out.update(_participants(world, others, x, y, psi, s, e, dt))
+        out.update(_participants(world, others, x, y, psi, s, e, dt, t0))
     return out
 
 
 def _participants(world: World, others: Others, x: np.ndarray, y: np.ndarray, psi: np.ndarray, s: np.ndarray,
-                  e: np.ndarray, dt: float) -> dict[str, np.ndarray]:
+                  e: np.ndarray, dt: float, t0: float) -> dict[str, np.ndarray]:
     """The participant signals the scenario's rules read (``world.participant_signals``), (K, T)
-    per participant among ``others``: present where it is within r_near."""
+    per participant among ``others`` (sample 0 at ``t0`` [s]): present where it is within r_near."""
     near = np.hypot(others.x.T[None] - x[..., None], others.y.T[None] - y[..., None]) <= world.settings.r_near
     other = {"s": others.s.T[None], "e": others.e.T[None], "psi": others.psi.T[None], "v": others.v.T[None]}
     rel = relations(world.route, {"s": s[..., None], "e": e[..., None], "psi": psi[..., None]},
@@ -212,6 +214,11 @@ def _participants(world: World, others: Others, x: np.ndarray, y: np.ndarray, ps
     if "a" in names:
         rel["a"] = acceleration(rel["v"], near, dt)
     rel[PRESENT] = np.where(near, np.inf, -np.inf)
+    if any(n in ZONE_PARTICIPANT_SIGNALS for n in names):
+        K, T = s.shape
+        rel.update(participant_zone_signals(world, s, np.broadcast_to(t0 + dt * np.arange(T), (K, T)),
+                                            {"x": others.x.T[None], "y": others.y.T[None], "psi": others.psi.T[None],
+                                             "v": others.v.T[None]}, others.length, near))
     ids = world.parts.ids
     return {participant_key(n, ids[j]): rel[n][..., i] for n in names for i, j in enumerate(others.index)}
 

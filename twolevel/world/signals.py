@@ -54,6 +54,7 @@ from twolevel.world.assumptions import ResponseBounds, safe_distance
 from twolevel.world.geometry import Route
 from twolevel.world.provided import PARTICIPANT_SIGNALS, PROVIDED_SIGNALS
 from twolevel.world.relations import acceleration, relations
+from twolevel.world.right_of_way import ZONE_PARTICIPANT_SIGNALS, participant_zone_signals, zone_signals
 from twolevel.world.traffic import RED, YELLOW, TrafficState
 from twolevel.world.world import World
 
@@ -251,19 +252,20 @@ def signals_along(
     }
     out["light_red"], out["d_light"] = _light(world, t, s, v)
     out.update(_others(world, traffic, x, y, psi, s, e, v))
+    out.update(zone_signals(world, s, v))
     assert set(out) == PROVIDED_SIGNALS
     return out
 
 
 def participant_signals_along(
     world: World, traffic: TrafficLog, ego: Mapping[str, np.ndarray], *, dt: float | None = None,
-    names: Sequence[str] = (PRESENT,) + PARTICIPANT_SIGNALS, ids: Sequence[str] | None = None,
+    names: Sequence[str] = (PRESENT,) + PARTICIPANT_SIGNALS, ids: Sequence[str] | None = None, t0: float = 0.0,
 ) -> dict[str, np.ndarray]:
     """Participant signals along an ego trajectory: for every participant of ``traffic`` (N of
     them, named ``ids``, default the world's participants) and each of ``names``, the (T,) array
     ``name[ID]`` (:func:`~twolevel.stl.analysis.participant_key`). ``ego`` as for
-    :func:`signals_along` (x, y [m], psi [rad], sampled every ``dt`` [s]); a participant is
-    present where it is active and within r_near."""
+    :func:`signals_along` (x, y [m], psi [rad], sampled every ``dt`` [s] from ``t0`` [s]); a
+    participant is present where it is active and within r_near."""
     dt = world.settings.dt if dt is None else dt
     ids = world.parts.ids if ids is None else ids
     x, y, psi = (np.asarray(ego[k], dtype=float) for k in ("x", "y", "psi"))
@@ -281,6 +283,9 @@ def participant_signals_along(
                     {"s": so, "e": eo, "psi": traffic.psi, "v": traffic.v}, traffic.length, traffic.width, near)
     rel["a"] = acceleration(rel["v"], near, dt)
     rel[PRESENT] = np.where(near, np.inf, -np.inf)
+    if any(n in ZONE_PARTICIPANT_SIGNALS for n in names):
+        rel.update(participant_zone_signals(world, s, t0 + dt * np.arange(T), {"x": traffic.x, "y": traffic.y,
+                                            "psi": traffic.psi, "v": traffic.v}, traffic.length, near))
     return {participant_key(n, pid): rel[n][:, j] for n in names for j, pid in enumerate(ids)}
 
 

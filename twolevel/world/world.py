@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from types import MappingProxyType
-from typing import Mapping
+from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
 
@@ -27,6 +27,9 @@ from twolevel.world.schema import ControllerSettings, LightCycle, MapFile
 from twolevel.world.speed_profile import Comfort, speed_profile
 from twolevel.world.traffic import GREEN, RED, YELLOW, Lights, Participants, SpeedLimits, StopLines, TrafficState
 from twolevel.world.traffic.junctions import conflicts_of
+
+if TYPE_CHECKING:
+    from twolevel.world.right_of_way import RouteZones
 
 __all__ = ["EgoStart", "Settings", "World", "build_world"]
 _STATES = {"green": GREEN, "yellow": YELLOW, "red": RED}
@@ -116,6 +119,13 @@ class World:
         from twolevel.world.relations import signals_read_by
 
         return signals_read_by(load_rulesets(self)[0])
+
+    @cached_property
+    def zones(self) -> "RouteZones":
+        """The conflict zones along the route (:mod:`twolevel.world.right_of_way`)."""
+        from twolevel.world.right_of_way import route_zones
+
+        return route_zones(self)
 
 
 def _limits(spec: MapFile, lanes: LaneSet, index: dict[str, int], plans: list[Plan]) -> SpeedLimits:

@@ -22,6 +22,7 @@ import numpy as np
 
 from twolevel.control.high_level.guards import (Pass, RssTerminal, TerminalStop, drivable_band, rss_terminal,
                                                 stop_lines, terminal_stop)
+from twolevel.control.high_level.right_of_way import ZoneConstants, give_way_line, zone_constants
 from twolevel.control.high_level.reference import reference, reference_controls, wrap_to
 from twolevel.control.high_level.settings import MPCSettings
 from twolevel.control.high_level.steering import steering_bound, steering_reference, steering_weight
@@ -82,6 +83,7 @@ class StepData:
     rss: RssTerminal | None = None
     steer_ref: np.ndarray | None = None
     steer_weight: np.ndarray | None = None
+    zones: ZoneConstants | None = None
 
     @property
     def N(self) -> int:
@@ -230,6 +232,8 @@ def prepare_step(
     s_line = math.inf
     if any(stop_rules):
         s_line = float(stop_lines(hc, stop=stop_rules[0], light=stop_rules[1])[-1])
+    zones = zone_constants(world, hc, s0, H) if "priority" in world.participant_signals else None
+    s_line = min(s_line, give_way_line(zones))
     if route.v_des.size and route.v_des[-1] <= 1e-9:  # the route stops at its goal
         s_line = min(s_line, float(route.s[-1]) + stop_margin)
     if math.isfinite(s_line):
@@ -246,7 +250,7 @@ def prepare_step(
     steer_weight = steering_weight(v_bar, params.l_f) if settings.lateral_weight else None
     return StepData(t, x0, np.asarray(u_prev, float), xs_bar, us_bar, A, B, c, omega, s_ref, s_bar, h_bar, p_bar,
                     lo, hi, hc, width, e_lo, e_hi, term, steering_bound(v_bar, kappa, params), steps, H, rss,
-                    steering_reference(kappa, params) if settings.lateral_weight else None, steer_weight)
+                    steering_reference(kappa, params) if settings.lateral_weight else None, steer_weight, zones)
 
 
 def history_length(history: Mapping[str, np.ndarray] | None, names: set[str], depth: int) -> int:

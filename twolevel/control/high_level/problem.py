@@ -51,6 +51,7 @@ from twolevel.compiler.signals import AffineSignal
 from twolevel.compiler.types import Encoding, Requirement
 from twolevel.control.codes import MIL517
 from twolevel.control.high_level.linearisation import StepData
+from twolevel.control.high_level.right_of_way import zone_signals_over
 from twolevel.control.high_level.settings import MPCSettings, Weights
 from twolevel.diagnostics import Diagnostic, Span
 from twolevel.milp.builder import ModelBuilder
@@ -200,6 +201,8 @@ def trace_signals(step: StepData, lay: Layout, n: int, past: Mapping[str, np.nda
                 out[name] = np.concatenate([hist(name, v_lead)[:-1], np.full(H + 1, v_lead)])
         elif name == "n_near":
             out[name] = np.concatenate([hist(name, float(len(hc.index)))[:-1], np.full(H + 1, float(len(hc.index)))])
+    out.update(zone_signals_over(step.zones, names, H, P,
+                                 lambda nm, c: _affine(xy, -t_hat, c - s_off, hist(nm, c - s_now), n), hist))
     return out
 
 

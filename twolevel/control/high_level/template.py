@@ -33,6 +33,7 @@ from twolevel.compiler.evaluator import Evaluator
 from twolevel.compiler.signals import AffineSignal, TraceSignals
 from twolevel.compiler.tree import Block, Box, IntervalBounds, Op
 from twolevel.compiler.types import Emission
+from twolevel.stl.analysis import expand_quantifiers, participants_in
 from twolevel.control.high_level.backend import Backend
 from twolevel.control.high_level.linearisation import StepData
 from twolevel.control.high_level.problem import (Assembled, StepRules, dynamics_values, guard_values, input_bounds,
@@ -130,8 +131,9 @@ def refresh(tpl: StepTemplate, step: StepData, rules: StepRules, settings: MPCSe
                    stable=True)
     writes: list[tuple[Emission, np.ndarray, np.ndarray, np.ndarray | None]] = []
     it = iter(tpl.emissions)
+    pids = participants_in(sigs)  # quantifiers over the participants in range, as the encoder expands them
     for req, kinds in zip(requirements, tpl.kinds):
-        p = _parts(ev.rob(req.formula, P, 1.0))
+        p = _parts(ev.rob(expand_quantifiers(req.formula, pids), P, 1.0))
         if p is None or p[1] < eps or tuple(_kind(b) for b in p[0]) != kinds:
             return None
         for b in p[0]:

@@ -1,0 +1,117 @@
+"""Right of way at junctions in the MPC: the conflict-area signals over the horizon, and the
+give-way line its terminal condition keeps the ego able to stop at.
+
+The definitions are :mod:`twolevel.world.right_of_way`'s (the reference). Over the fine part of
+the horizon (k = 0..H):
+
+* ``d_zone``,k = s_in − L/2 − s_k and ``d_zone_out``,k = s_out + L/2 − s_k, affine in the ego's
+  state through the route progress s_k ≈ s̄_k + t̄_kᵀ(p_k − p̄_k) (:mod:`.problem`); the area is
+  the one next at solve time (+inf / −inf: none).
+* ``t_reach[ID]``, ``t_clear[ID]``, ``priority[ID]`` and ``present[ID]`` of every participant
+  within ``r_near`` now: constants, the definitions evaluated on its constant-velocity prediction
+  (``hc.xy``, as :func:`~twolevel.world.signals.horizon_constants` predicts it) with the area
+  held; ``present`` +inf over the horizon. The encoder expands a rule's quantifier over them.
+
+**The give-way line.** The rules see one second ahead; a car coming up to a junction at speed
+cannot stop in that second. While a participant with priority is within ``r_near`` and has not
+yet passed the area, the terminal can-still-stop condition of
+:mod:`~twolevel.control.high_level.guards` keeps the ego able to stop :data:`RUN_UP` metres before
+the area's entry (room to reach a crossing speed again from standstill), as it does at a stop
+line; with nobody to give way to it does not apply. Units: m, s, m/s.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable, Mapping
+
+import numpy as np
+
+from twolevel.stl.analysis import PRESENT, participant_key, split_participant_key
+from twolevel.world.provided import PARTICIPANT_ABSENT
+from twolevel.world.right_of_way import (ZONE_PARTICIPANT_SIGNALS, _next_area, participant_zone_signals)
+from twolevel.world.signals import HorizonConstants
+from twolevel.world.world import World
+
+__all__ = ["RUN_UP", "ZoneConstants", "zone_constants", "give_way_line", "zone_signals_over", "MPC_ZONE_PATTERNS"]
+
+RUN_UP = 3.0
+"""[m] How far before a conflict area the ego waits for a gap (its front): room to reach the speed
+rules/right_of_way.stl asks inside (2.5 m/s at about 1 m/s²)."""
+
+MPC_ZONE_PATTERNS = frozenset(participant_key(n, "*") for n in ZONE_PARTICIPANT_SIGNALS)
+"""The participant signals the MPC predicts (as the patterns a rule's reads name them)."""
+
+
+@dataclass(frozen=True, eq=False)
+class ZoneConstants:
+    """The next conflict area at solve time: route entry ``s_in`` and exit ``s_out`` [m]
+    (±inf: none), the ego's ``length`` [m]; participants ``ids`` (n,) within r_near and their
+    ``t_reach``/``t_clear`` [s], ``priority`` (n, H+1) over the fine part."""
+
+    s_in: float = math.inf
+    s_out: float = -math.inf
+    length: float = 0.0
+    ids: tuple[str, ...] = ()
+    values: Mapping[str, np.ndarray] = field(default_factory=dict)
+
+    def waiting(self) -> bool:
+        """Whether someone with priority is present and not past the area now."""
+        p, r = self.values.get("priority"), self.values.get("t_reach")
+        return bool(p is not None and len(p) and np.any((p[:, 0] > 0.5) & np.isfinite(r[:, 0])))
+
+
+def zone_constants(world: World, hc: HorizonConstants, s0: float, H: int) -> ZoneConstants:
+    """The :class:`ZoneConstants` at route position ``s0`` [m] over the first H steps of ``hc``."""
+    z = world.zones
+    k = int(_next_area(z, np.array(s0), float(world.ego.length), world.settings.r_near))
+    if k < 0:
+        return ZoneConstants(length=float(world.ego.length))
+    n = len(hc.index)
+    ids = tuple(world.parts.ids[i] for i in hc.index)
+    f = slice(0, H + 1)
+    other = {"x": hc.xy[:, f, 0].T, "y": hc.xy[:, f, 1].T, "psi": hc.psi[:, f].T,
+             "v": np.broadcast_to(hc.v[None, :], (H + 1, n))}
+    vals = participant_zone_signals(world, np.full(H + 1, s0), hc.t[f], other, hc.length,
+                                    np.ones((H + 1, n), dtype=bool)) if n else {}
+    return ZoneConstants(float(z.area_s0[k]), float(z.area_s1[k]), float(world.ego.length), ids,
+                         {name: np.asarray(v).T for name, v in vals.items()})
+
+
+def give_way_line(zc: ZoneConstants | None) -> float:
+    """[m] The route position of the ego's centre at which it must be able to stop (+inf: none)."""
+    if zc is None or not math.isfinite(zc.s_in) or not zc.waiting():
+        return math.inf
+    return zc.s_in - zc.length / 2 - RUN_UP
+
+
+def zone_signals_over(zc: ZoneConstants | None, names: frozenset[str] | set[str], H: int, P: int,
+                      route_s: Callable[[str, float], object], hist: Callable[[str, float], np.ndarray]
+                      ) -> dict[str, object]:
+    """The signals of ``names`` this module provides over the trace (P past samples from
+    ``hist``, now, k = 1..H). ``route_s(name, c)`` is the affine signal c − s_k (``name``'s past
+    before it); ``hist(name, now)``: the recorded past of ``name`` then ``now`` (a participant's
+    past not recorded reads as absent)."""
+    zc = zc or ZoneConstants()
+    out: dict[str, object] = {}
+
+    def past(name: str, now: float, absent: float) -> np.ndarray:
+        h = hist(name, now)[:-1]
+        return np.concatenate([np.full(P - len(h), absent), h])
+
+    for name, c, none in (("d_zone", zc.s_in - zc.length / 2, np.inf), ("d_zone_out", zc.s_out + zc.length / 2, -np.inf)):
+        if name in names:
+            out[name] = route_s(name, c) if math.isfinite(c) else np.concatenate([past(name, none, none),
+                                                                                 np.full(H + 1, none)])
+    wanted = [split_participant_key(nm) for nm in names]
+    wanted = [w[0] for w in wanted if w is not None and w[1] == "*" and w[0] in ZONE_PARTICIPANT_SIGNALS]
+    if wanted:
+        for j, pid in enumerate(zc.ids):
+            key = participant_key(PRESENT, pid)
+            out[key] = np.concatenate([past(key, np.inf, -np.inf), np.full(H + 1, np.inf)])
+            for name in wanted:
+                key = participant_key(name, pid)
+                row = zc.values[name][j] if name in zc.values else np.full(H + 1, PARTICIPANT_ABSENT[name])
+                out[key] = np.concatenate([past(key, float(row[0]), PARTICIPANT_ABSENT[name]), row])
+    return out
