@@ -60,6 +60,8 @@ t_reach       s      +inf      time for o to reach the ego's next conflict area 
 t_clear       s      0         time for o to clear that area at its speed (+inf standing in or before it)
 priority      1/0    0         1 when o goes before the ego there (arm priorities, a left turn gives
                                way to oncoming traffic, lights)
+d_exit        m      −inf      how far the ego's rear has to go along the route to leave its zone of
+                               the conflict with o's way (< 0 once left)
 ============  =====  ========  =====================================================================
 
 The last three (and the ego's d_zone … t_zone_out) are :mod:`twolevel.world.right_of_way`'s.
@@ -93,7 +95,7 @@ PROVIDED_SIGNALS: frozenset[str] = frozenset(SIGNALS)
 """The same names as a set (what the type checker accepts as a rule's inputs)."""
 
 PARTICIPANT_SIGNALS: tuple[str, ...] = ("v", "a", "d_lon", "d_lat", "in_same_lane", "cut_in", "precedes", "t_reach",
-                                        "t_clear", "priority")
+                                        "t_clear", "priority", "d_exit")
 """Every participant signal the world provides, in the order of the table above."""
 
 PROVIDED_PARTICIPANT_SIGNALS: frozenset[str] = frozenset(PARTICIPANT_SIGNALS)
@@ -101,7 +103,8 @@ PROVIDED_PARTICIPANT_SIGNALS: frozenset[str] = frozenset(PARTICIPANT_SIGNALS)
 
 PARTICIPANT_ABSENT: Mapping[str, float] = MappingProxyType({
     "v": 0.0, "a": 0.0, "d_lon": math.inf, "d_lat": math.inf, "in_same_lane": -math.inf, "cut_in": -math.inf,
-    "precedes": -math.inf, "t_reach": math.inf, "t_clear": 0.0, "priority": 0.0})
+    "precedes": -math.inf, "t_reach": math.inf, "t_clear": 0.0, "priority": 0.0,
+    "d_exit": -math.inf})
 """Each participant signal's value where its participant is absent."""
 
 __all__ = ["SIGNALS", "PROVIDED_SIGNALS", "PARTICIPANT_SIGNALS", "PROVIDED_PARTICIPANT_SIGNALS",

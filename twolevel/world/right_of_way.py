@@ -27,9 +27,12 @@ and ``first``, who goes first by the arms' priorities). Definitions (the table o
   order (−1: lights of different phases, or equal lanes) o goes first unless a red light holds
   it; and never while o's own arm shows red (a light on o's incoming lane, red or yellow with o
   able to stop is not asked: red only). 0 otherwise, and where o is absent.
+* **d_exit(o)** [m]: how far the ego's rear still has to go along the route to leave its own zone
+  of the conflict(s) with o's way (the latest exit of those o's reach and clearing count; < 0
+  once left), so that the ego's time to get out of o's way is d_exit(o) over its speed.
 
 Absent participants (not within ``r_near``, or on no conflicting lane): t_reach +inf,
-t_clear 0, priority 0 — a rule body reads "nobody coming". Everything is vectorised over any
+t_clear 0, priority 0, d_exit −inf — a rule body reads "nobody coming". Everything is vectorised over any
 leading shape (samples, candidate trajectories) with participants on the last axis. Units: m, s,
 m/s, rad.
 """
@@ -52,7 +55,7 @@ STANDING = 0.1
 ZONE_SIGNALS = ("d_zone", "d_zone_out", "t_zone", "t_zone_out")
 """The ego's signals of its next conflict area (in :data:`twolevel.world.provided.SIGNALS`)."""
 
-ZONE_PARTICIPANT_SIGNALS = ("t_reach", "t_clear", "priority")
+ZONE_PARTICIPANT_SIGNALS = ("t_reach", "t_clear", "priority", "d_exit")
 """The participant signals of the ego's next conflict area."""
 
 
@@ -68,6 +71,7 @@ class RouteZones:
     area_s0: np.ndarray
     area_s1: np.ndarray
     area: np.ndarray
+    exit: np.ndarray
     lane: np.ndarray
     enter: np.ndarray
     leave: np.ndarray
@@ -77,13 +81,13 @@ class RouteZones:
     @classmethod
     def none(cls) -> "RouteZones":
         f, i = np.zeros(0), np.zeros(0, dtype=int)
-        return cls(f, f, i, i, f, f, i, i)
+        return cls(f, f, i, f, i, f, f, i, i)
 
 
 def route_zones(world: object) -> RouteZones:
     """The :class:`RouteZones` of ``world`` (a :class:`~twolevel.world.world.World`)."""
     jn, route, lanes = world.junctions, world.route, world.lanes  # type: ignore[attr-defined]
-    rows: list[tuple[int, int, float, float, int, int]] = []
+    rows: list[tuple[int, float, int, float, float, int, int]] = []
     s0s, s1s = [], []
     for lane, a, b, start in route.pieces:
         xs, side = jn.conflicts_of(int(lane))
@@ -94,7 +98,7 @@ def route_zones(world: object) -> RouteZones:
         k = len(s0s)
         s0s.append(float(ez0.min()))
         s1s.append(float(ez1.max()))
-        for x, sd in zip(xs.tolist(), side.tolist()):
+        for x, sd, out in zip(xs.tolist(), side.tolist(), ez1.tolist()):
             other = int(jn.conflict_lane[x, 1 - sd])
             first = int(jn.conflict_first[x])
             mine = -1 if first < 0 else int(first == 1 - sd)
@@ -103,14 +107,14 @@ def route_zones(world: object) -> RouteZones:
             lit = np.flatnonzero(world.lights.lane == inc)  # type: ignore[attr-defined]
             light = int(lit[0]) if len(lit) else -1
             z0, z1 = float(jn.conflict_s0[x, 1 - sd]), float(jn.conflict_s1[x, 1 - sd])
-            rows.append((k, other, z0, z1, mine, light))
+            rows.append((k, out, other, z0, z1, mine, light))
             extra = float(lanes.length[inc])
-            rows.append((k, inc, z0 + extra, z1 + extra, mine, light))
+            rows.append((k, out, inc, z0 + extra, z1 + extra, mine, light))
     if not rows:
         return RouteZones.none()
     r = np.array(rows, dtype=float)
-    return RouteZones(np.array(s0s), np.array(s1s), r[:, 0].astype(int), r[:, 1].astype(int), r[:, 2], r[:, 3],
-                      r[:, 4].astype(int), r[:, 5].astype(int))
+    return RouteZones(np.array(s0s), np.array(s1s), r[:, 0].astype(int), r[:, 1], r[:, 2].astype(int), r[:, 3], r[:, 4],
+                      r[:, 5].astype(int), r[:, 6].astype(int))
 
 
 def _next_area(z: RouteZones, s: np.ndarray, length: float, r_near: float) -> np.ndarray:
@@ -146,7 +150,7 @@ def zone_signals(world: object, s: np.ndarray, v: np.ndarray) -> dict[str, np.nd
 
 def participant_zone_signals(world: object, s: np.ndarray, t: np.ndarray, other: Mapping[str, np.ndarray],
                              length: np.ndarray, near: np.ndarray) -> dict[str, np.ndarray]:
-    """``t_reach``, ``t_clear``, ``priority`` of n participants (..., n) for an ego at route
+    """``t_reach``, ``t_clear``, ``priority``, ``d_exit`` of n participants (..., n) for an ego at route
     positions ``s`` (...) [m] at times ``t`` (...) [s]. ``other``: ``x``, ``y`` [m], ``psi``
     [rad], ``v`` [m/s], each (..., n); ``length`` (n,) [m]; ``near`` (..., n): where each is
     present."""
@@ -155,7 +159,8 @@ def participant_zone_signals(world: object, s: np.ndarray, t: np.ndarray, other:
     z: RouteZones = world.zones  # type: ignore[attr-defined]
     lanes = world.lanes  # type: ignore[attr-defined]
     shape = np.broadcast_shapes(np.shape(other["x"]), np.shape(near))
-    out = {"t_reach": np.full(shape, np.inf), "t_clear": np.zeros(shape), "priority": np.zeros(shape)}
+    out = {"t_reach": np.full(shape, np.inf), "t_clear": np.zeros(shape), "priority": np.zeros(shape),
+           "d_exit": np.full(shape, -np.inf)}
     if not len(z.area) or not np.any(near):
         return out
     k = _next_area(z, s, float(world.ego.length), world.settings.r_near)  # type: ignore[attr-defined]
@@ -167,6 +172,7 @@ def participant_zone_signals(world: object, s: np.ndarray, t: np.ndarray, other:
     x, y, psi, v = (np.broadcast_to(other[f], shape).ravel()[m] for f in ("x", "y", "psi", "v"))
     L = np.broadcast_to(np.asarray(length, dtype=float), shape).ravel()[m]
     area, tt = k.ravel()[m], t.ravel()[m]
+    rear = np.broadcast_to(np.asarray(s, dtype=float)[..., None], shape).ravel()[m] - float(world.ego.length) / 2
     # pairs (participant sample, row of its area)
     hit = area[:, None] == z.area[None, :]
     p, r = np.nonzero(hit)
@@ -192,10 +198,12 @@ def participant_zone_signals(world: object, s: np.ndarray, t: np.ndarray, other:
     prio = np.where(red, 0.0, np.where(first < 0, 1.0, first.astype(float)))
     valid = on & (d_out > 0)
     reach_m, clear_m, prio_m = np.full(len(m), np.inf), np.zeros(len(m)), np.zeros(len(m))
+    exit_m = np.full(len(m), -np.inf)
     np.minimum.at(reach_m, p[valid], reach[valid])
     np.maximum.at(clear_m, p[valid], clear[valid])
     np.maximum.at(prio_m, p[valid], prio[valid])
-    for name, val in (("t_reach", reach_m), ("t_clear", clear_m), ("priority", prio_m)):
+    np.maximum.at(exit_m, p[valid], z.exit[r[valid]] - rear[p[valid]])
+    for name, val in (("t_reach", reach_m), ("t_clear", clear_m), ("priority", prio_m), ("d_exit", exit_m)):
         flat = out[name].ravel()
         flat[m] = val
         out[name] = flat.reshape(shape)

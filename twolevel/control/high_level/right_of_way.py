@@ -7,6 +7,8 @@ the horizon (k = 0..H):
 * ``d_zone``,k = s_in − L/2 − s_k and ``d_zone_out``,k = s_out + L/2 − s_k, affine in the ego's
   state through the route progress s_k ≈ s̄_k + t̄_kᵀ(p_k − p̄_k) (:mod:`.problem`); the area is
   the one next at solve time (+inf / −inf: none).
+* ``d_exit[ID]``,k = c − s_k, c the route position at which the ego's rear leaves its zone of
+  the conflict with the participant's way (the latest over the horizon's predictions: affine);
 * ``t_reach[ID]``, ``t_clear[ID]``, ``priority[ID]`` and ``present[ID]`` of every participant
   within ``r_near`` now: constants, the definitions evaluated on its constant-velocity prediction
   (``hc.xy``, as :func:`~twolevel.world.signals.horizon_constants` predicts it) with the area
@@ -14,7 +16,8 @@ the horizon (k = 0..H):
 
 **The give-way line.** The rules see one second ahead; a car coming up to a junction at speed
 cannot stop in that second. While a participant with priority is within ``r_near`` and has not
-yet passed the area, the terminal can-still-stop condition of
+yet passed the area, or a slow vehicle ahead in the ego's lane leaves no room behind the area's
+exit (:data:`BLOCK_SPEED`, :data:`BLOCK_GAP`: the junction cannot be cleared), the terminal can-still-stop condition of
 :mod:`~twolevel.control.high_level.guards` keeps the ego able to stop :data:`RUN_UP` metres before
 the area's entry (room to reach a crossing speed again from standstill), as it does at a stop
 line; with nobody to give way to it does not apply. Units: m, s, m/s.
@@ -34,11 +37,16 @@ from twolevel.world.right_of_way import (ZONE_PARTICIPANT_SIGNALS, _next_area, p
 from twolevel.world.signals import HorizonConstants
 from twolevel.world.world import World
 
-__all__ = ["RUN_UP", "ZoneConstants", "zone_constants", "give_way_line", "zone_signals_over", "MPC_ZONE_PATTERNS"]
+__all__ = ["RUN_UP", "BLOCK_SPEED", "BLOCK_GAP", "ZoneConstants", "zone_constants", "give_way_line", "zone_signals_over", "MPC_ZONE_PATTERNS"]
 
 RUN_UP = 3.0
 """[m] How far before a conflict area the ego waits for a gap (its front): room to reach the speed
 rules/right_of_way.stl asks inside (2.5 m/s at about 1 m/s²)."""
+
+BLOCK_SPEED = 2.5
+"""[m/s] A vehicle ahead slower than this beyond a conflict area may block its exit."""
+BLOCK_GAP = 2.0
+"""[m] The room the ego needs behind such a vehicle once it has left the area."""
 
 MPC_ZONE_PATTERNS = frozenset(participant_key(n, "*") for n in ZONE_PARTICIPANT_SIGNALS)
 """The participant signals the MPC predicts (as the patterns a rule's reads name them)."""
@@ -47,19 +55,23 @@ MPC_ZONE_PATTERNS = frozenset(participant_key(n, "*") for n in ZONE_PARTICIPANT_
 @dataclass(frozen=True, eq=False)
 class ZoneConstants:
     """The next conflict area at solve time: route entry ``s_in`` and exit ``s_out`` [m]
-    (±inf: none), the ego's ``length`` [m]; participants ``ids`` (n,) within r_near and their
-    ``t_reach``/``t_clear`` [s], ``priority`` (n, H+1) over the fine part."""
+    (±inf: none), the ego's route position ``s0`` [m] and ``length`` [m]; participants ``ids``
+    (n,) within r_near and their ``values`` (n, H+1) over the fine part: ``t_reach``/``t_clear``
+    [s], ``priority``, ``d_exit`` [m] (with the ego held at s0; the MPC makes it c − s_k)."""
 
     s_in: float = math.inf
     s_out: float = -math.inf
+    s0: float = 0.0
     length: float = 0.0
     ids: tuple[str, ...] = ()
     values: Mapping[str, np.ndarray] = field(default_factory=dict)
+    blocked: bool = False
 
     def waiting(self) -> bool:
-        """Whether someone with priority is present and not past the area now."""
+        """Whether the ego waits before the area: someone with priority is present and not past
+        it now, or the exit is ``blocked``."""
         p, r = self.values.get("priority"), self.values.get("t_reach")
-        return bool(p is not None and len(p) and np.any((p[:, 0] > 0.5) & np.isfinite(r[:, 0])))
+        return self.blocked or bool(p is not None and len(p) and np.any((p[:, 0] > 0.5) & np.isfinite(r[:, 0])))
 
 
 def zone_constants(world: World, hc: HorizonConstants, s0: float, H: int) -> ZoneConstants:
@@ -75,8 +87,13 @@ def zone_constants(world: World, hc: HorizonConstants, s0: float, H: int) -> Zon
              "v": np.broadcast_to(hc.v[None, :], (H + 1, n))}
     vals = participant_zone_signals(world, np.full(H + 1, s0), hc.t[f], other, hc.length,
                                     np.ones((H + 1, n), dtype=bool)) if n else {}
-    return ZoneConstants(float(z.area_s0[k]), float(z.area_s1[k]), float(world.ego.length), ids,
-                         {name: np.asarray(v).T for name, v in vals.items()})
+    L = float(world.ego.length)
+    # the exit is blocked when the vehicle ahead in the ego's lane (slower than a crossing, v_ahead
+    # held) would leave no room for the ego behind the area's exit
+    room = float(hc.s_ahead[min(H, len(hc.s_ahead) - 1)]) - hc.ahead_offset - BLOCK_GAP
+    blocked = hc.ahead >= 0 and hc.v_ahead < BLOCK_SPEED and room < float(z.area_s1[k]) + L / 2
+    return ZoneConstants(float(z.area_s0[k]), float(z.area_s1[k]), s0, L, ids,
+                         {name: np.asarray(v).T for name, v in vals.items()}, bool(blocked))
 
 
 def give_way_line(zc: ZoneConstants | None) -> float:
@@ -113,5 +130,8 @@ def zone_signals_over(zc: ZoneConstants | None, names: frozenset[str] | set[str]
             for name in wanted:
                 key = participant_key(name, pid)
                 row = zc.values[name][j] if name in zc.values else np.full(H + 1, PARTICIPANT_ABSENT[name])
-                out[key] = np.concatenate([past(key, float(row[0]), PARTICIPANT_ABSENT[name]), row])
+                if name == "d_exit" and np.isfinite(row).any():  # c − s_k: where the ego leaves o's way
+                    out[key] = route_s(key, float(np.max(row[np.isfinite(row)])) + zc.s0)
+                else:
+                    out[key] = np.concatenate([past(key, float(row[0]), PARTICIPANT_ABSENT[name]), row])
     return out
