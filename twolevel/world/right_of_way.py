@@ -18,7 +18,10 @@ and ``first``, who goes first by the arms' priorities). Definitions (the table o
   line, within the lane's length, and it heads the lane's way (within
   :data:`~twolevel.world.signals.LEAD_HEADING`). Its distance to the zone's entry is
   d_in = zone start − front and to its exit d_out = zone end − rear, along its lane (from an
-  incoming lane: the rest of that lane plus the way into the connecting lane). ``t_reach(o)`` =
+  incoming lane: the rest of that lane plus the way into the connecting lane; a participant
+  still on the incoming lane is taken to go straight on or to cross the ego's way — a *turn* that
+  merges into the ego's way counts once it is on its turning lane, as a driver reads the
+  indicator). ``t_reach(o)`` =
   max(d_in, 0)/v_o (0 inside; +inf once past, or standing short of it), ``t_clear(o)`` =
   max(d_out, 0)/v_o (+inf standing in or before it). On an incoming lane a participant's turn is
   not known: every connecting lane from it that conflicts counts, the earliest reach, the latest
@@ -44,7 +47,11 @@ from typing import Mapping
 
 import numpy as np
 
+from twolevel.world.conflicts import MERGING
+from twolevel.world.junction import TURNS
 from twolevel.world.traffic import RED
+
+STRAIGHT = TURNS.index("straight")
 
 __all__ = ["STANDING", "RouteZones", "route_zones", "zone_signals", "participant_zone_signals", "ZONE_SIGNALS",
            "ZONE_PARTICIPANT_SIGNALS"]
@@ -108,6 +115,8 @@ def route_zones(world: object) -> RouteZones:
             light = int(lit[0]) if len(lit) else -1
             z0, z1 = float(jn.conflict_s0[x, 1 - sd]), float(jn.conflict_s1[x, 1 - sd])
             rows.append((k, out, other, z0, z1, mine, light))
+            if jn.conflict_kind[x] == MERGING and jn.conn_turn[c] != STRAIGHT:
+                continue  # a turn into the ego's way counts once it is under way (see the module docstring)
             extra = float(lanes.length[inc])
             rows.append((k, out, inc, z0 + extra, z1 + extra, mine, light))
     if not rows:

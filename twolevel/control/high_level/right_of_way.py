@@ -15,12 +15,11 @@ the horizon (k = 0..H):
   held; ``present`` +inf over the horizon. The encoder expands a rule's quantifier over them.
 
 **The give-way line.** The rules see one second ahead; a car coming up to a junction at speed
-cannot stop in that second. While a participant with priority is within ``r_near`` and has not
-yet passed the area, or a slow vehicle ahead in the ego's lane leaves no room behind the area's
+cannot stop in that second. While a participant with priority is within ``r_near`` and would come
+sooner than the gap the ego needs from it (:data:`GAP_MARGIN`, :data:`GAP_SPEED`), or a slow vehicle ahead in the ego's lane leaves no room behind the area's
 exit (:data:`BLOCK_SPEED`, :data:`BLOCK_GAP`: the junction cannot be cleared), the terminal can-still-stop condition of
 :mod:`~twolevel.control.high_level.guards` keeps the ego able to stop :data:`RUN_UP` metres before
-the area's entry (room to reach a crossing speed again from standstill), as it does at a stop
-line; with nobody to give way to it does not apply. Units: m, s, m/s.
+the area's entry, as it does at a stop line; with nobody to give way to it does not apply. Units: m, s, m/s.
 """
 
 from __future__ import annotations
@@ -37,12 +36,17 @@ from twolevel.world.right_of_way import (ZONE_PARTICIPANT_SIGNALS, _next_area, p
 from twolevel.world.signals import HorizonConstants
 from twolevel.world.world import World
 
-__all__ = ["RUN_UP", "BLOCK_SPEED", "BLOCK_GAP", "ZoneConstants", "zone_constants", "give_way_line", "zone_signals_over", "MPC_ZONE_PATTERNS"]
+__all__ = ["RUN_UP", "GAP_MARGIN", "GAP_SPEED", "BLOCK_SPEED", "BLOCK_GAP", "ZoneConstants", "zone_constants", "give_way_line", "zone_signals_over", "MPC_ZONE_PATTERNS"]
 
-RUN_UP = 3.0
-"""[m] How far before a conflict area the ego waits for a gap (its front): room to reach the speed
-rules/right_of_way.stl asks inside (2.5 m/s at about 1 m/s²)."""
+RUN_UP = 1.0
+"""[m] How far before a conflict area the ego waits for a gap (its front); from there it moves off
+into the area accelerating, as rules/right_of_way.stl allows, and a stop sign's line (the area
+starts a metre or two past it) is within its stop zone."""
 
+GAP_MARGIN, GAP_SPEED = 1.5, 2.5
+"""[s], [m/s] The gap the give-way line assumes the rules ask for: rules/right_of_way.stl's
+t_margin and v_go (a rule asking for more is still kept over the fine part; one asking for less
+waits longer than it must)."""
 BLOCK_SPEED = 2.5
 """[m/s] A vehicle ahead slower than this beyond a conflict area may block its exit."""
 BLOCK_GAP = 2.0
@@ -68,10 +72,17 @@ class ZoneConstants:
     blocked: bool = False
 
     def waiting(self) -> bool:
-        """Whether the ego waits before the area: someone with priority is present and not past
-        it now, or the exit is ``blocked``."""
-        p, r = self.values.get("priority"), self.values.get("t_reach")
-        return self.blocked or bool(p is not None and len(p) and np.any((p[:, 0] > 0.5) & np.isfinite(r[:, 0])))
+        """Whether the ego waits before the area: someone with priority comes sooner than the
+        gap the ego needs from it now (:data:`GAP_MARGIN` + d_exit / :data:`GAP_SPEED`), or the
+        exit is ``blocked``."""
+        p, r, d = self.values.get("priority"), self.values.get("t_reach"), self.values.get("d_exit")
+        if self.blocked:
+            return True
+        if p is None or not len(p):
+            return False
+        with np.errstate(invalid="ignore"):
+            short = r[:, 0] < GAP_MARGIN + np.maximum(d[:, 0], 0.0) / GAP_SPEED
+        return bool(np.any((p[:, 0] > 0.5) & short))
 
 
 def zone_constants(world: World, hc: HorizonConstants, s0: float, H: int) -> ZoneConstants:
