@@ -37,7 +37,9 @@ from twolevel.verdict.judge import judge_run, recorded_ride
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ("traffic_rules", "safety", "scalability", "comparison")
-SUITE = tuple(sorted(p.stem for p in (ROOT / "scenarios" / "everyday").glob("*.yaml")))
+RIGHT_OF_WAY = ("yield_priority_road", "left_turn_stream", "four_way_stop_crossing", "blocked_exit")
+"""The right-of-way scenarios (scenarios/traffic/), part of the suite."""
+SUITE = tuple(sorted(p.stem for p in (ROOT / "scenarios" / "everyday").glob("*.yaml"))) + RIGHT_OF_WAY
 #: Before the safety layer (main at fb74f82, the MPC and the NMPC with the paper's low level):
 #: goal time [s] of a route that stops at its goal, else the route position [m] at the end.
 BEFORE: dict[tuple[str, str], tuple[str, float]] = {
@@ -68,6 +70,8 @@ def _load() -> str:
 
 
 def _path(name: str) -> Path:
+    if name in RIGHT_OF_WAY:
+        return ROOT / "scenarios" / "traffic" / f"{name}.yaml"
     return ROOT / "scenarios" / (f"{name}.yaml" if name in SCENARIOS else f"everyday/{name}.yaml")
 
 
