@@ -59,6 +59,10 @@ __all__ = ["STANDING", "RouteZones", "route_zones", "zone_signals", "participant
 STANDING = 0.1
 """[m/s] At or below this speed a body stands: it reaches nothing (time +inf)."""
 
+REACH_DISTANCE = "reach_distance"
+"""The key under which :func:`participant_zone_signals` also returns each participant's distance
+[m] to the area along its way (0 inside, +inf: none): for predictions beyond constant velocity."""
+
 ZONE_SIGNALS = ("d_zone", "d_zone_out", "t_zone", "t_zone_out")
 """The ego's signals of its next conflict area (in :data:`twolevel.world.provided.SIGNALS`)."""
 
@@ -162,7 +166,7 @@ def participant_zone_signals(world: object, s: np.ndarray, t: np.ndarray, other:
     """``t_reach``, ``t_clear``, ``priority``, ``d_exit`` of n participants (..., n) for an ego at route
     positions ``s`` (...) [m] at times ``t`` (...) [s]. ``other``: ``x``, ``y`` [m], ``psi``
     [rad], ``v`` [m/s], each (..., n); ``length`` (n,) [m]; ``near`` (..., n): where each is
-    present."""
+    present. Also returns :data:`REACH_DISTANCE` (not a signal)."""
     from twolevel.world.signals import same_way
 
     z: RouteZones = world.zones  # type: ignore[attr-defined]
@@ -207,12 +211,15 @@ def participant_zone_signals(world: object, s: np.ndarray, t: np.ndarray, other:
     prio = np.where(red, 0.0, np.where(first < 0, 1.0, first.astype(float)))
     valid = on & (d_out > 0)
     reach_m, clear_m, prio_m = np.full(len(m), np.inf), np.zeros(len(m)), np.zeros(len(m))
-    exit_m = np.full(len(m), -np.inf)
+    exit_m, dist_m = np.full(len(m), -np.inf), np.full(len(m), np.inf)
     np.minimum.at(reach_m, p[valid], reach[valid])
     np.maximum.at(clear_m, p[valid], clear[valid])
     np.maximum.at(prio_m, p[valid], prio[valid])
     np.maximum.at(exit_m, p[valid], z.exit[r[valid]] - rear[p[valid]])
-    for name, val in (("t_reach", reach_m), ("t_clear", clear_m), ("priority", prio_m), ("d_exit", exit_m)):
+    np.minimum.at(dist_m, p[valid], np.maximum(d_in[valid], 0.0))
+    out[REACH_DISTANCE] = np.full(shape, np.inf)
+    for name, val in (("t_reach", reach_m), ("t_clear", clear_m), ("priority", prio_m), ("d_exit", exit_m),
+                      (REACH_DISTANCE, dist_m)):
         flat = out[name].ravel()
         flat[m] = val
         out[name] = flat.reshape(shape)

@@ -15,8 +15,10 @@ the horizon (k = 0..H):
   held; ``present`` +inf over the horizon. The encoder expands a rule's quantifier over them.
 
 **The give-way line.** The rules see one second ahead; a car coming up to a junction at speed
-cannot stop in that second. While a participant with priority is within ``r_near`` and would come
-sooner than the gap the ego needs from it (:data:`GAP_MARGIN`, :data:`GAP_SPEED`), or a slow vehicle ahead in the ego's lane leaves no room behind the area's
+cannot stop in that second. While a moving participant with priority is within ``r_near`` and could
+come, at the earliest under the world's assumptions about others (accelerating at their a_max up
+to their speed bound: what the safety layer's verifier checks an entry against), sooner than the
+gap the ego needs from it (:data:`GAP_MARGIN`, :data:`GAP_SPEED`), or a slow vehicle ahead in the ego's lane leaves no room behind the area's
 exit (:data:`BLOCK_SPEED`, :data:`BLOCK_GAP`: the junction cannot be cleared), the terminal can-still-stop condition of
 :mod:`~twolevel.control.high_level.guards` keeps the ego able to stop :data:`RUN_UP` metres before
 the area's entry, as it does at a stop line; with nobody to give way to it does not apply. Units: m, s, m/s.
@@ -32,11 +34,12 @@ import numpy as np
 
 from twolevel.stl.analysis import PRESENT, participant_key, split_participant_key
 from twolevel.world.provided import PARTICIPANT_ABSENT
-from twolevel.world.right_of_way import (ZONE_PARTICIPANT_SIGNALS, _next_area, participant_zone_signals)
+from twolevel.world.right_of_way import (REACH_DISTANCE, STANDING, ZONE_PARTICIPANT_SIGNALS, _next_area,
+                                         participant_zone_signals)
 from twolevel.world.signals import HorizonConstants
 from twolevel.world.world import World
 
-__all__ = ["RUN_UP", "GAP_MARGIN", "GAP_SPEED", "BLOCK_SPEED", "BLOCK_GAP", "ZoneConstants", "zone_constants", "give_way_line", "zone_signals_over", "MPC_ZONE_PATTERNS"]
+__all__ = ["RUN_UP", "GAP_MARGIN", "GAP_SPEED", "BLOCK_SPEED", "BLOCK_GAP", "ZoneConstants", "zone_constants", "give_way_line", "worst_reach", "zone_signals_over", "MPC_ZONE_PATTERNS"]
 
 RUN_UP = 1.0
 """[m] How far before a conflict area the ego waits for a gap (its front); from there it moves off
@@ -61,7 +64,9 @@ class ZoneConstants:
     """The next conflict area at solve time: route entry ``s_in`` and exit ``s_out`` [m]
     (±inf: none), the ego's route position ``s0`` [m] and ``length`` [m]; participants ``ids``
     (n,) within r_near and their ``values`` (n, H+1) over the fine part: ``t_reach``/``t_clear``
-    [s], ``priority``, ``d_exit`` [m] (with the ego held at s0; the MPC makes it c − s_k)."""
+    [s], ``priority``, ``d_exit`` [m] (with the ego held at s0; the MPC makes it c − s_k);
+    ``worst_reach`` (n,) [s]: when each could reach the area at the earliest under the world's
+    assumptions (:func:`worst_reach`); ``blocked``: the exit is."""
 
     s_in: float = math.inf
     s_out: float = -math.inf
@@ -70,18 +75,19 @@ class ZoneConstants:
     ids: tuple[str, ...] = ()
     values: Mapping[str, np.ndarray] = field(default_factory=dict)
     blocked: bool = False
+    worst_reach: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def waiting(self) -> bool:
         """Whether the ego waits before the area: someone with priority comes sooner than the
         gap the ego needs from it now (:data:`GAP_MARGIN` + d_exit / :data:`GAP_SPEED`), or the
         exit is ``blocked``."""
-        p, r, d = self.values.get("priority"), self.values.get("t_reach"), self.values.get("d_exit")
+        p, d = self.values.get("priority"), self.values.get("d_exit")
         if self.blocked:
             return True
         if p is None or not len(p):
             return False
         with np.errstate(invalid="ignore"):
-            short = r[:, 0] < GAP_MARGIN + np.maximum(d[:, 0], 0.0) / GAP_SPEED
+            short = self.worst_reach < GAP_MARGIN + np.maximum(d[:, 0], 0.0) / GAP_SPEED
         return bool(np.any((p[:, 0] > 0.5) & short))
 
 
@@ -99,12 +105,31 @@ def zone_constants(world: World, hc: HorizonConstants, s0: float, H: int) -> Zon
     vals = participant_zone_signals(world, np.full(H + 1, s0), hc.t[f], other, hc.length,
                                     np.ones((H + 1, n), dtype=bool)) if n else {}
     L = float(world.ego.length)
+    worst = np.zeros(0)
+    if n:
+        b = world.parts.bounds[hc.index]
+        v_cap = np.minimum(b[:, 0], b[:, 1] * float(world.limits.value.max(initial=float(world.route.limit_v.max()))))
+        worst = np.where(hc.v > STANDING, worst_reach(vals[REACH_DISTANCE][0], hc.v, b[:, 2], v_cap), np.inf)
     # the exit is blocked when the vehicle ahead in the ego's lane (slower than a crossing, v_ahead
     # held) would leave no room for the ego behind the area's exit
     room = float(hc.s_ahead[min(H, len(hc.s_ahead) - 1)]) - hc.ahead_offset - BLOCK_GAP
     blocked = hc.ahead >= 0 and hc.v_ahead < BLOCK_SPEED and room < float(z.area_s1[k]) + L / 2
     return ZoneConstants(float(z.area_s0[k]), float(z.area_s1[k]), s0, L, ids,
-                         {name: np.asarray(v).T for name, v in vals.items()}, bool(blocked))
+                         {name: np.asarray(v).T for name, v in vals.items()}, bool(blocked), worst)
+
+
+def worst_reach(d: np.ndarray, v: np.ndarray, a_max: np.ndarray, v_cap: np.ndarray) -> np.ndarray:
+    """[s] The earliest a body at speed ``v`` [m/s] covers ``d`` [m] accelerating at ``a_max``
+    [m/s²] up to ``v_cap`` [m/s] (the safety layer's assumptions about others: what its
+    verifier checks an entry against). +inf for d = +inf."""
+    d, v = np.asarray(d, float), np.asarray(v, float)
+    v_top = np.maximum(v_cap, v)
+    t1 = (v_top - v) / a_max
+    d1 = 0.5 * (v + v_top) * t1
+    with np.errstate(invalid="ignore", divide="ignore"):
+        accel = (np.sqrt(v * v + 2 * a_max * np.minimum(d, d1)) - v) / a_max
+        out = np.where(d <= d1, accel, t1 + (d - d1) / v_top)
+    return np.where(np.isfinite(d), out, np.inf)
 
 
 def give_way_line(zc: ZoneConstants | None) -> float:
