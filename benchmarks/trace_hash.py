@@ -7,7 +7,7 @@ without its timing figures. Prints ``name hash`` lines; compare the output of tw
 ``diff``. Not a test: the plans depend on the solver's time limit only when a step runs out of
 time, which does not happen on the paper's scenarios on a quiet machine.
 
-    python benchmarks/trace_hash.py [--duration S] [scenario ...]
+    python benchmarks/trace_hash.py [--duration S] [--drop COL,...] [scenario ...]
 """
 
 from __future__ import annotations
@@ -38,13 +38,14 @@ def _strip_timing(value: object) -> object:
     return value
 
 
-def fingerprint(run_dir: Path) -> str:
-    """SHA-256 over the trace without its wall-clock columns and the summary without timings."""
+def fingerprint(run_dir: Path, drop: tuple[str, ...] = ()) -> str:
+    """SHA-256 over the trace without its wall-clock columns (and the columns ``drop``) and the
+    summary without timings."""
     h = hashlib.sha256()
     with open(run_dir / "trace.csv", newline="", encoding="utf-8") as fh:
         reader = csv.reader(fh)
         header = next(reader)
-        keep = [i for i, name in enumerate(header) if name not in TIMING_COLUMNS]
+        keep = [i for i, name in enumerate(header) if name not in TIMING_COLUMNS and name not in drop]
         for row in [header, *reader]:
             h.update(",".join(row[i] for i in keep).encode())
             h.update(b"\n")
@@ -57,6 +58,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scenarios", nargs="*", default=list(SCENARIOS))
     ap.add_argument("--duration", type=float, default=None, help="override each run's duration [s]")
+    ap.add_argument("--drop", default="", help="columns left out, comma-separated (compare with a reference "
+                    "taken before they were added)")
     args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.scenarios:
@@ -66,7 +69,8 @@ def main(argv: list[str] | None = None) -> int:
             if summary is None:
                 print(f"{name} failed: {[d.message for d in diags]}", file=sys.stderr)
                 return 1
-            print(f"{Path(name).stem} {fingerprint(out)}", flush=True)
+            drop = tuple(c for c in args.drop.split(",") if c)
+            print(f"{Path(name).stem} {fingerprint(out, drop)}", flush=True)
     return 0
 
 

@@ -29,6 +29,9 @@ that can be written smoothly become constraints, chosen from what the rule sets 
   term keeps it feasible from step to step. (The term at every step instead makes the rows
   nearly dependent and IPOPT crawls: 200 iterations instead of 12, measured.)
 * a rule reading ``light_red`` or ``d_light``: the same at every step k where the light is red.
+* a rule reading the right-of-way signals (``d_zone``, ``t_reach(o)``, …): the same at the
+  high level's give-way line (:func:`~twolevel.control.high_level.right_of_way.give_way_line`)
+  while it holds — the baseline waits before a conflict area, it does not encode the gap rule.
 
 Anything else (e.g. ``keep_gap`` on d_lead, past operators) is not expressed; each such rule
 gets an ``MIL530`` warning at construction. The NLP is built once (:class:`NmpcProblem`) and
@@ -56,6 +59,7 @@ import numpy as np
 
 from twolevel.control.codes import MIL515, MIL530
 from twolevel.control.high_level.guards import stop_lines
+from twolevel.control.high_level.right_of_way import MPC_ZONE_PATTERNS, give_way_line
 from twolevel.control.high_level.linearisation import StepData, prepare_step, sensing_bound
 from twolevel.control.high_level.settings import MPCSettings
 from twolevel.control.high_level.steering import steering_reference
@@ -131,7 +135,7 @@ class NmpcController:
             {k: v for k, v in world.ego.vehicle.items() if k in VehicleParams.__dataclass_fields__})
         self.options = options or NmpcOptions()
         self.diagnostics: list[Diagnostic] = []
-        self.speed = self.stop = self.light = False
+        self.speed = self.stop = self.light = self.give_way = False
         self.d_collision: float | None = None
         for rs in rulesets:
             for r in rs.rules:
@@ -144,6 +148,8 @@ class NmpcController:
                     self.stop = used = True
                 if reads & {"light_red", "d_light"}:
                     self.light = used = True
+                if reads & ({"d_zone", "d_zone_out"} | MPC_ZONE_PATTERNS):
+                    self.give_way = used = True
                 for c in _calls(f, "collision_free"):
                     d = analysis.fold_term(c.args[0]) if len(c.args) == 1 else None
                     if isinstance(d, ast.Num):
@@ -153,7 +159,7 @@ class NmpcController:
                     self.diagnostics.append(MIL530(
                         f"rule '{r.name}' is not a speed limit, stop line, red light or collision_free rule; "
                         "the NMPC baseline ignores it", r.span or Span(rs.file),
-                        hint="the NMPC expresses v_max, d_stop, light_red/d_light and collision_free(d) only"))
+                        hint="the NMPC expresses v_max, d_stop, light_red/d_light, the give-way line and collision_free(d) only"))
         st = self.settings
         o = self.options
         self.problem = NmpcProblem(model, H=st.H, dt=st.dt, weights=st.weights, bicycle=self.params,
@@ -220,6 +226,8 @@ class NmpcController:
         vb = np.minimum(vb, sensing_bound(float(x0[3]), np.arange(H + 1), dt, ws.v_sense, ws.response.brake_min))
         # stop lines: the nearest line that applies at step k (inf: none)
         s_line = stop_lines(hc, stop=self.stop, light=self.light)[1:]  # the high level's definition
+        if self.give_way:  # right of way: wait where the high level's give-way line is, while it holds
+            s_line = np.minimum(s_line, give_way_line(step.zones))
         stop = np.tile([0.0, 0.0, 1.0, 0.0], (H, 1))
         decel = self.options.stop_decel or abs(self.params.a_min)
         act = np.isfinite(s_line)
