@@ -53,8 +53,8 @@ from twolevel.world.traffic import RED
 
 STRAIGHT = TURNS.index("straight")
 
-__all__ = ["STANDING", "RouteZones", "route_zones", "zone_signals", "participant_zone_signals", "ZONE_SIGNALS",
-           "ZONE_PARTICIPANT_SIGNALS"]
+__all__ = ["STANDING", "REACH_DISTANCE", "RouteZones", "route_zones", "next_area", "zone_signals",
+           "participant_zone_signals", "ZONE_SIGNALS", "ZONE_PARTICIPANT_SIGNALS"]
 
 STANDING = 0.1
 """[m/s] At or below this speed a body stands: it reaches nothing (time +inf)."""
@@ -101,7 +101,7 @@ def route_zones(world: object) -> RouteZones:
     rows: list[tuple[int, float, int, float, float, int, int]] = []
     s0s, s1s = [], []
     for lane, a, b, start in route.pieces:
-        xs, side = jn.conflicts_of(int(lane))
+        xs, side = np.nonzero(jn.conflict_lane == int(lane))  # the conflicts of this lane, its side in each
         if not len(xs):
             continue
         ez0 = start + jn.conflict_s0[xs, side] - a
@@ -130,7 +130,7 @@ def route_zones(world: object) -> RouteZones:
                       r[:, 5].astype(int), r[:, 6].astype(int))
 
 
-def _next_area(z: RouteZones, s: np.ndarray, length: float, r_near: float) -> np.ndarray:
+def next_area(z: RouteZones, s: np.ndarray, length: float, r_near: float) -> np.ndarray:
     """Index of the next area (−1: none) for route positions ``s`` (...) [m] of the ego's centre."""
     if not len(z.area_s0):
         return np.full(np.shape(s), -1)
@@ -146,7 +146,7 @@ def zone_signals(world: object, s: np.ndarray, v: np.ndarray) -> dict[str, np.nd
     z: RouteZones = world.zones  # type: ignore[attr-defined]
     L = float(world.ego.length)  # type: ignore[attr-defined]
     s, v = np.asarray(s, dtype=float), np.asarray(v, dtype=float)
-    k = _next_area(z, s, L, world.settings.r_near)  # type: ignore[attr-defined]
+    k = next_area(z, s, L, world.settings.r_near)  # type: ignore[attr-defined]
     has = k >= 0
     kk = np.maximum(k, 0)
     a0 = z.area_s0[kk] if len(z.area_s0) else np.zeros(k.shape)
@@ -176,7 +176,7 @@ def participant_zone_signals(world: object, s: np.ndarray, t: np.ndarray, other:
            "d_exit": np.full(shape, -np.inf)}
     if not len(z.area) or not np.any(near):
         return out
-    k = _next_area(z, s, float(world.ego.length), world.settings.r_near)  # type: ignore[attr-defined]
+    k = next_area(z, s, float(world.ego.length), world.settings.r_near)  # type: ignore[attr-defined]
     k = np.broadcast_to(np.asarray(k)[..., None], shape)
     t = np.broadcast_to(np.asarray(t, dtype=float)[..., None], shape)
     m = np.flatnonzero((near & (k >= 0)).ravel())

@@ -29,6 +29,7 @@ from twolevel.control.high_level.steering import steering_bound, steering_refere
 from twolevel.control.planner import PreviousPlan
 from twolevel.models import bicycle
 from twolevel.models.params import BicycleParams
+from twolevel.stl.analysis import split_participant_key
 from twolevel.world.signals import HorizonConstants, StopMemory
 from twolevel.world.traffic import TrafficState
 from twolevel.world.world import World
@@ -254,11 +255,14 @@ def prepare_step(
 
 
 def history_length(history: Mapping[str, np.ndarray] | None, names: set[str], depth: int) -> int:
-    """How many past samples every signal in ``names`` has (at most ``depth``)."""
+    """How many past samples every signal in ``names`` has (at most ``depth``); participants'
+    signals (``NAME[*]``) do not limit it."""
     if depth <= 0 or not history:
         return 0
     n = depth
     for name in names:
+        if split_participant_key(name) is not None:  # a participant's signals: absent before it was sensed
+            continue
         h = history.get(name)
         n = min(n, 0 if h is None else len(h))
     return max(n, 0)

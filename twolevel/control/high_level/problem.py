@@ -202,7 +202,7 @@ def trace_signals(step: StepData, lay: Layout, n: int, past: Mapping[str, np.nda
         elif name == "n_near":
             out[name] = np.concatenate([hist(name, float(len(hc.index)))[:-1], np.full(H + 1, float(len(hc.index)))])
     out.update(zone_signals_over(step.zones, names, H, P,
-                                 lambda nm, c: _affine(xy, -t_hat, c - s_off, hist(nm, c - s_now), n), hist))
+                                 lambda pst, c: _affine(xy, -t_hat, c - s_off, np.append(pst, c - s_now), n), hist))
     return out
 
 

@@ -15,13 +15,15 @@ the horizon (k = 0..H):
   held; ``present`` +inf over the horizon. The encoder expands a rule's quantifier over them.
 
 **The give-way line.** The rules see one second ahead; a car coming up to a junction at speed
-cannot stop in that second. While a moving participant with priority is within ``r_near`` and could
-come, at the earliest under the world's assumptions about others (accelerating at their a_max up
-to their speed bound: what the safety layer's verifier checks an entry against), sooner than the
-gap the ego needs from it (:data:`GAP_MARGIN`, :data:`GAP_SPEED`), or a slow vehicle ahead in the ego's lane leaves no room behind the area's
-exit (:data:`BLOCK_SPEED`, :data:`BLOCK_GAP`: the junction cannot be cleared), the terminal can-still-stop condition of
+cannot stop in that second. While a moving participant with priority is within ``r_near`` and
+could come, at the earliest under the world's assumptions about others (accelerating at their
+a_max up to their speed bound: what the safety layer's verifier checks an entry against), sooner
+than the gap the ego needs from it (:data:`GAP_MARGIN`, :data:`GAP_SPEED`), or a slow vehicle
+ahead in the ego's lane leaves no room behind the area's exit (:data:`BLOCK_SPEED`,
+:data:`BLOCK_GAP`: the junction cannot be cleared), the terminal can-still-stop condition of
 :mod:`~twolevel.control.high_level.guards` keeps the ego able to stop :data:`RUN_UP` metres before
-the area's entry, as it does at a stop line; with nobody to give way to it does not apply. Units: m, s, m/s.
+the area's entry, as it does at a stop line; with nobody to give way to it does not apply.
+Units: m, s, m/s.
 """
 
 from __future__ import annotations
@@ -34,12 +36,13 @@ import numpy as np
 
 from twolevel.stl.analysis import PRESENT, participant_key, split_participant_key
 from twolevel.world.provided import PARTICIPANT_ABSENT
-from twolevel.world.right_of_way import (REACH_DISTANCE, STANDING, ZONE_PARTICIPANT_SIGNALS, _next_area,
+from twolevel.world.right_of_way import (REACH_DISTANCE, STANDING, ZONE_PARTICIPANT_SIGNALS, next_area,
                                          participant_zone_signals)
 from twolevel.world.signals import HorizonConstants
 from twolevel.world.world import World
 
-__all__ = ["RUN_UP", "GAP_MARGIN", "GAP_SPEED", "BLOCK_SPEED", "BLOCK_GAP", "ZoneConstants", "zone_constants", "give_way_line", "worst_reach", "zone_signals_over", "MPC_ZONE_PATTERNS"]
+__all__ = ["RUN_UP", "GAP_MARGIN", "GAP_SPEED", "BLOCK_SPEED", "BLOCK_GAP", "ZoneConstants", "zone_constants",
+           "give_way_line", "worst_reach", "zone_signals_over", "MPC_ZONE_PATTERNS"]
 
 RUN_UP = 1.0
 """[m] How far before a conflict area the ego waits for a gap (its front); from there it moves off
@@ -94,7 +97,7 @@ class ZoneConstants:
 def zone_constants(world: World, hc: HorizonConstants, s0: float, H: int) -> ZoneConstants:
     """The :class:`ZoneConstants` at route position ``s0`` [m] over the first H steps of ``hc``."""
     z = world.zones
-    k = int(_next_area(z, np.array(s0), float(world.ego.length), world.settings.r_near))
+    k = int(next_area(z, np.array(s0), float(world.ego.length), world.settings.r_near))
     if k < 0:
         return ZoneConstants(length=float(world.ego.length))
     n = len(hc.index)
@@ -108,7 +111,8 @@ def zone_constants(world: World, hc: HorizonConstants, s0: float, H: int) -> Zon
     worst = np.zeros(0)
     if n:
         b = world.parts.bounds[hc.index]
-        v_cap = np.minimum(b[:, 0], b[:, 1] * float(world.limits.value.max(initial=float(world.route.limit_v.max()))))
+        top = float(world.limits.value.max(initial=float(world.route.limit_v.max())))  # any lane's limit
+        v_cap = np.minimum(b[:, 0], b[:, 1] * top)
         worst = np.where(hc.v > STANDING, worst_reach(vals[REACH_DISTANCE][0], hc.v, b[:, 2], v_cap), np.inf)
     # the exit is blocked when the vehicle ahead in the ego's lane (slower than a crossing, v_ahead
     # held) would leave no room for the ego behind the area's exit
@@ -140,12 +144,12 @@ def give_way_line(zc: ZoneConstants | None) -> float:
 
 
 def zone_signals_over(zc: ZoneConstants | None, names: frozenset[str] | set[str], H: int, P: int,
-                      route_s: Callable[[str, float], object], hist: Callable[[str, float], np.ndarray]
+                      route_s: Callable[[np.ndarray, float], object], hist: Callable[[str, float], np.ndarray]
                       ) -> dict[str, object]:
     """The signals of ``names`` this module provides over the trace (P past samples from
-    ``hist``, now, k = 1..H). ``route_s(name, c)`` is the affine signal c − s_k (``name``'s past
-    before it); ``hist(name, now)``: the recorded past of ``name`` then ``now`` (a participant's
-    past not recorded reads as absent)."""
+    ``hist``, now, k = 1..H). ``route_s(past, c)`` is the affine signal c − s_k after the P
+    samples ``past``; ``hist(name, now)``: the recorded past of ``name`` then ``now`` (what is
+    not recorded reads as absent)."""
     zc = zc or ZoneConstants()
     out: dict[str, object] = {}
 
@@ -153,10 +157,11 @@ def zone_signals_over(zc: ZoneConstants | None, names: frozenset[str] | set[str]
         h = hist(name, now)[:-1]
         return np.concatenate([np.full(P - len(h), absent), h])
 
-    for name, c, none in (("d_zone", zc.s_in - zc.length / 2, np.inf), ("d_zone_out", zc.s_out + zc.length / 2, -np.inf)):
+    for name, c, none in (("d_zone", zc.s_in - zc.length / 2, np.inf),
+                          ("d_zone_out", zc.s_out + zc.length / 2, -np.inf)):
         if name in names:
-            out[name] = route_s(name, c) if math.isfinite(c) else np.concatenate([past(name, none, none),
-                                                                                 np.full(H + 1, none)])
+            pst = past(name, none, none)
+            out[name] = route_s(pst, c) if math.isfinite(c) else np.concatenate([pst, np.full(H + 1, none)])
     wanted = [split_participant_key(nm) for nm in names]
     wanted = [w[0] for w in wanted if w is not None and w[1] == "*" and w[0] in ZONE_PARTICIPANT_SIGNALS]
     if wanted:
@@ -167,7 +172,7 @@ def zone_signals_over(zc: ZoneConstants | None, names: frozenset[str] | set[str]
                 key = participant_key(name, pid)
                 row = zc.values[name][j] if name in zc.values else np.full(H + 1, PARTICIPANT_ABSENT[name])
                 if name == "d_exit" and np.isfinite(row).any():  # c − s_k: where the ego leaves o's way
-                    out[key] = route_s(key, float(np.max(row[np.isfinite(row)])) + zc.s0)
+                    out[key] = route_s(past(key, -np.inf, -np.inf), float(np.max(row[np.isfinite(row)])) + zc.s0)
                 else:
                     out[key] = np.concatenate([past(key, float(row[0]), PARTICIPANT_ABSENT[name]), row])
     return out
