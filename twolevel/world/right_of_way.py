@@ -173,9 +173,60 @@ def participant_zone_signals(world: object, s: np.ndarray, t: np.ndarray, other:
     lanes = world.lanes  # type: ignore[attr-defined]
     shape = np.broadcast_shapes(np.shape(other["x"]), np.shape(near))
     out = {"t_reach": np.full(shape, np.inf), "t_clear": np.zeros(shape), "priority": np.zeros(shape),
-           "d_exit": np.full(shape, -np.inf)}
+           "d_exit": np.full(shape, -np.inf), REACH_DISTANCE: np.full(shape, np.inf)}
     if not len(z.area) or not np.any(near):
         return out
+    k = np.broadcast_to(np.asarray(next_area(z, s, float(world.ego.length),  # type: ignore[attr-defined]
+                                            world.settings.r_near))[..., None], shape)  # type: ignore[attr-defined]
+    used = np.unique(k[near & (k >= 0)])
+    if not len(used):
+        return out
+    # each participant sample once (K candidate trajectories share the others' predictions), on
+    # every lane a participant may come along to the areas in use
+    t_col = np.asarray(t, dtype=float)[..., None]
+    own = np.broadcast_shapes(*(np.shape(other[f]) for f in ("x", "y", "psi", "v")), t_col.shape, np.shape(length))
+    x, y, psi, v, tt, L = (np.broadcast_to(a, own).ravel() for a in (other["x"], other["y"], other["psi"], other["v"],
+                                                                     t_col, np.asarray(length, dtype=float)))
+    rows = np.flatnonzero(np.isin(z.area, used))
+    p = np.repeat(np.arange(len(x)), len(rows))
+    r = np.tile(rows, len(x))
+    lane = z.lane[r]
+    s_o, lat = lanes.project(lane, np.stack([x[p], y[p]], axis=1))
+    s_in = np.clip(s_o, 0.0, lanes.length[lane])
+    on = ((np.abs(lat) <= 0.5 * lanes.width_at(lane, s_in)) & (s_o >= -L[p] / 2)
+          & (s_o <= lanes.length[lane] + L[p] / 2) & same_way(psi[p], lanes.pose(lane, s_in)[1]))
+    d_in = z.enter[r] - (s_o + L[p] / 2)
+    d_out = z.leave[r] - (s_o - L[p] / 2)
+    moving = v[p] > STANDING
+    vv = np.where(moving, v[p], 1.0)
+    valid = on & (d_out > 0)
+    reach = np.where(~valid, np.inf, np.where(d_in <= 0, 0.0, np.where(moving, d_in / vv, np.inf)))
+    clear = np.where(~valid, 0.0, np.where(moving, d_out / vv, np.inf))
+    light = z.light[r]
+    red = np.zeros(len(r), dtype=bool)
+    if (light >= 0).any():
+        states = world.lights.state_at(tt[p])  # type: ignore[attr-defined]
+        red = (light >= 0) & (np.take_along_axis(states, np.maximum(light, 0)[:, None], axis=1)[:, 0] == RED)
+    prio = np.where(~valid | red, 0.0, np.where(z.first[r] < 0, 1.0, z.first[r].astype(float)))
+    exit_ = np.where(valid, z.exit[r], -np.inf)
+    dist = np.where(valid, np.maximum(d_in, 0.0), np.inf)
+    # per (participant sample, area): the earliest reach, the latest clearing, any priority
+    A = len(z.area_s0)
+    col = p * A + z.area[r]
+    tables = {}
+    for name, val, init, red_op in (("t_reach", reach, np.inf, np.minimum), ("t_clear", clear, 0.0, np.maximum),
+                                    ("priority", prio, 0.0, np.maximum), ("d_exit", exit_, -np.inf, np.maximum),
+                                    (REACH_DISTANCE, dist, np.inf, np.minimum)):
+        tab = np.full(len(x) * A, init)
+        red_op.at(tab, col, val)
+        tables[name] = tab
+    idx = np.broadcast_to(np.arange(len(x)).reshape(own), shape) * A + np.maximum(k, 0)
+    here = near & (k >= 0)
+    rear = np.asarray(s, dtype=float)[..., None] - float(world.ego.length) / 2  # type: ignore[attr-defined]
+    for name, tab in tables.items():
+        got = tab[idx] - (rear if name == "d_exit" else 0.0)
+        out[name] = np.where(here, got, out[name])
+    return out
     k = next_area(z, s, float(world.ego.length), world.settings.r_near)  # type: ignore[attr-defined]
     k = np.broadcast_to(np.asarray(k)[..., None], shape)
     t = np.broadcast_to(np.asarray(t, dtype=float)[..., None], shape)

@@ -215,8 +215,8 @@ def _participants(world: World, others: Others, x: np.ndarray, y: np.ndarray, ps
         rel["a"] = acceleration(rel["v"], near, dt)
     rel[PRESENT] = np.where(near, np.inf, -np.inf)
     if any(n in ZONE_PARTICIPANT_SIGNALS for n in names):
-        K, T = s.shape
-        rel.update(participant_zone_signals(world, s, np.broadcast_to(t0 + dt * np.arange(T), (K, T)),
+        T = s.shape[1]
+        rel.update(participant_zone_signals(world, s, (t0 + dt * np.arange(T))[None],
                                             {"x": others.x.T[None], "y": others.y.T[None], "psi": others.psi.T[None],
                                              "v": others.v.T[None]}, others.length, near))
     ids = world.parts.ids
