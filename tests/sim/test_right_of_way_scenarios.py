@@ -2,11 +2,9 @@
 four_way_stop_crossing, blocked_exit) in the closed loop with the real controller, judged against
 their own ``expect:`` (the offline monitor on the trace: give_way, clear_junction), and read
 back from the trace: the ego waited before the conflict area while a priority car came, went in a
-gap, and never stood inside. The all-way stop runs without the safety layer:
-with it the verifier refuses the entry the rule allows (others' worst case under the assumptions
-is sooner than their constant-velocity arrival) and its braking fail-safe stops the ego inside
-the area — a disagreement this branch reports rather than hides (the left turn passes with it:
-the give-way line reads moving cars' worst-case arrival)."""
+gap, and never stood inside. All run with the safety layer: the MPC's give-way line reads the
+priority cars' earliest arrival under the assumptions, as the verifier does, so the verifier never
+refuses a crossing halfway (its braking fail-safe would stop the ego inside the area)."""
 
 from __future__ import annotations
 
@@ -23,9 +21,9 @@ ROOT = Path(__file__).resolve().parents[2]
 TRAFFIC = ROOT / "scenarios" / "traffic"
 
 
-def _run(tmp_path: Path, name: str, safety: bool = True) -> dict[str, np.ndarray]:
+def _run(tmp_path: Path, name: str) -> dict[str, np.ndarray]:
     path = TRAFFIC / f"{name}.yaml"
-    summary, diags = simulate_scenario(str(path), str(tmp_path / name), frames=False, ttr_every=0, safety=safety)
+    summary, diags = simulate_scenario(str(path), str(tmp_path / name), frames=False, ttr_every=0)
     assert summary is not None and summary.status == "complete", [d.message for d in diags]
     verdict, _ = judge_run(summary.run_dir, str(path))
     assert verdict.passed, [c.detail for c in verdict.failed]  # goal, no collision at fault, the rules
@@ -72,7 +70,7 @@ def test_left_turn_waits_for_oncoming_cars_and_turns_after_them(tmp_path: Path) 
 
 @pytest.mark.slow
 def test_all_way_stop_with_crossing_traffic(tmp_path: Path) -> None:
-    c = _run(tmp_path, "four_way_stop_crossing", safety=False)
+    c = _run(tmp_path, "four_way_stop_crossing")
     inside, _ = _check_gaps(c)
     assert inside.any()
 

@@ -15,9 +15,10 @@ the horizon (k = 0..H):
   held; ``present`` +inf over the horizon. The encoder expands a rule's quantifier over them.
 
 **The give-way line.** The rules see one second ahead; a car coming up to a junction at speed
-cannot stop in that second. While a moving participant with priority is within ``r_near`` and
-could come, at the earliest under the world's assumptions about others (accelerating at their
-a_max up to their speed bound: what the safety layer's verifier checks an entry against), sooner
+cannot stop in that second. While a participant with priority is within ``r_near`` and could
+come, at the earliest under the world's assumptions about others (accelerating at their a_max up
+to their speed bound, from standstill too: what the safety layer's verifier checks an entry
+against; a crossing it refused halfway would end in its braking fail-safe, inside), sooner
 than the gap the ego needs from it (:data:`GAP_MARGIN`, :data:`GAP_SPEED`), or a slow vehicle
 ahead in the ego's lane leaves no room behind the area's exit (:data:`BLOCK_SPEED`,
 :data:`BLOCK_GAP`: the junction cannot be cleared), the terminal can-still-stop condition of
@@ -36,7 +37,7 @@ import numpy as np
 
 from twolevel.stl.analysis import PRESENT, participant_key, split_participant_key
 from twolevel.world.provided import PARTICIPANT_ABSENT
-from twolevel.world.right_of_way import (REACH_DISTANCE, STANDING, ZONE_PARTICIPANT_SIGNALS, next_area,
+from twolevel.world.right_of_way import (REACH_DISTANCE, ZONE_PARTICIPANT_SIGNALS, next_area,
                                          participant_zone_signals)
 from twolevel.world.signals import HorizonConstants
 from twolevel.world.world import World
@@ -113,7 +114,7 @@ def zone_constants(world: World, hc: HorizonConstants, s0: float, H: int) -> Zon
         b = world.parts.bounds[hc.index]
         top = float(world.limits.value.max(initial=float(world.route.limit_v.max())))  # any lane's limit
         v_cap = np.minimum(b[:, 0], b[:, 1] * top)
-        worst = np.where(hc.v > STANDING, worst_reach(vals[REACH_DISTANCE][0], hc.v, b[:, 2], v_cap), np.inf)
+        worst = worst_reach(vals[REACH_DISTANCE][0], hc.v, b[:, 2], v_cap)
     # the exit is blocked when the vehicle ahead in the ego's lane (slower than a crossing, v_ahead
     # held) would leave no room for the ego behind the area's exit
     room = float(hc.s_ahead[min(H, len(hc.s_ahead) - 1)]) - hc.ahead_offset - BLOCK_GAP
