@@ -8,17 +8,32 @@ refuses a crossing halfway (its braking fail-safe would stop the ego inside the 
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from typer.testing import CliRunner
+
+from twolevel.cli import app
 from twolevel.monitor.tracefile import read_trace
 from twolevel.sim.engine import simulate_scenario
 from twolevel.verdict.judge import judge_run
 
 ROOT = Path(__file__).resolve().parents[2]
 TRAFFIC = ROOT / "scenarios" / "traffic"
+
+
+def _monitored(trace_csv: Path, c: dict[str, np.ndarray]) -> None:
+    """``twolevel monitor rules/right_of_way.stl`` on the trace: both rules hold at every sample,
+    and its robustness series are the run's own ``rob_`` columns."""
+    r = CliRunner().invoke(app, ["monitor", str(ROOT / "rules" / "right_of_way.stl"), str(trace_csv),
+                                 "--format", "json", "--series"])
+    assert r.exit_code == 0, r.output
+    for rule in json.loads(r.output)["rules"]:
+        series = np.array([np.inf if v == "inf" else v for v in rule["series"]], dtype=float)
+        np.testing.assert_allclose(series, c[f"rob_{rule['name']}"], rtol=1e-6, atol=1e-6)
 
 
 def _run(tmp_path: Path, name: str) -> dict[str, np.ndarray]:
@@ -31,6 +46,7 @@ def _run(tmp_path: Path, name: str) -> dict[str, np.ndarray]:
     assert trace is not None
     out = {k: np.asarray(v, float) for k, v in trace.columns.items()}
     out["t"] = np.asarray(trace.t, float)
+    _monitored(Path(summary.run_dir) / "trace.csv", out)
     return out
 
 
