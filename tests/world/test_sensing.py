@@ -141,7 +141,8 @@ def test_batched_participant_signals_equal_the_reference() -> None:
     for k in range(K):
         log = TrafficLog(others.x.T, others.y.T, others.psi.T, others.v.T, np.ones((T, others.n), bool),
                          w.parts.length[others.index], w.parts.width[others.index])
-        ref = participant_signals_along(w, log, {"x": pts[k, :, 0], "y": pts[k, :, 1], "psi": psi[k]}, ids=ids)
+        ref = participant_signals_along(w, log, {"x": pts[k, :, 0], "y": pts[k, :, 1], "psi": psi[k]}, ids=ids,
+                                        names=w.participant_signals)
         for key, want in ref.items():
             np.testing.assert_allclose(got[key][k], want, rtol=0, atol=1e-6, err_msg=f"{key} row {k}")
     assert set(got) - PROVIDED_SIGNALS == set(ref)

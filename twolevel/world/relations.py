@@ -24,7 +24,19 @@ from twolevel.stl.analysis import PRESENT, participant_signals_read, quantifies
 from twolevel.world.geometry import Route
 from twolevel.world.provided import PARTICIPANT_ABSENT, PARTICIPANT_SIGNALS
 
-__all__ = ["LOOK_AHEAD", "relations", "acceleration", "signals_read_by", "absent_sample", "extents", "lanes_occupied"]
+__all__ = ["LEAD_HEADING", "same_way", "LOOK_AHEAD", "relations", "acceleration", "signals_read_by", "absent_sample", "extents", "lanes_occupied"]
+
+LEAD_HEADING = np.pi / 4
+"""[rad] Largest heading difference from the route at which another vehicle still travels the same
+way (a leader, a follower): a lane change or a bend is well within it, a crossing is not."""
+
+
+def same_way(psi: np.ndarray | float, heading: np.ndarray | float) -> np.ndarray:
+    """Whether vehicles heading ``psi`` [rad] travel the way ``heading`` [rad] points: the
+    difference within :data:`LEAD_HEADING` (cos 90° is 6e−17, not 0: a sign test lets a crossing
+    vehicle through)."""
+    return np.cos(np.asarray(psi) - np.asarray(heading)) >= np.cos(LEAD_HEADING)
+
 
 LOOK_AHEAD = 1.0
 """[s] How far ahead ``cut_in`` looks at a participant's lateral motion towards the ego."""

@@ -16,7 +16,7 @@ and ``first``, who goes first by the arms' priorities). Definitions (the table o
 * **A participant's way to the area**: it is *on* a conflicting connecting lane, or on that
   lane's incoming lane, when its centre lies within half the lane's width of the lane's centre
   line, within the lane's length, and it heads the lane's way (within
-  :data:`~twolevel.world.signals.LEAD_HEADING`). Its distance to the zone's entry is
+  :data:`~twolevel.world.relations.LEAD_HEADING`). Its distance to the zone's entry is
   d_in = zone start − front and to its exit d_out = zone end − rear, along its lane (from an
   incoming lane: the rest of that lane plus the way into the connecting lane; a participant
   still on the incoming lane is taken to go straight on or to cross the ego's way — a *turn* that
@@ -49,6 +49,7 @@ import numpy as np
 
 from twolevel.world.conflicts import MERGING
 from twolevel.world.junction import TURNS
+from twolevel.world.relations import same_way
 from twolevel.world.traffic import RED
 
 STRAIGHT = TURNS.index("straight")
@@ -167,8 +168,6 @@ def participant_zone_signals(world: object, s: np.ndarray, t: np.ndarray, other:
     positions ``s`` (...) [m] at times ``t`` (...) [s]. ``other``: ``x``, ``y`` [m], ``psi``
     [rad], ``v`` [m/s], each (..., n); ``length`` (n,) [m]; ``near`` (..., n): where each is
     present. Also returns :data:`REACH_DISTANCE` (not a signal)."""
-    from twolevel.world.signals import same_way
-
     z: RouteZones = world.zones  # type: ignore[attr-defined]
     lanes = world.lanes  # type: ignore[attr-defined]
     shape = np.broadcast_shapes(np.shape(other["x"]), np.shape(near))

@@ -53,7 +53,7 @@ from twolevel.stl.analysis import PRESENT, participant_key
 from twolevel.world.assumptions import ResponseBounds, safe_distance
 from twolevel.world.geometry import Route
 from twolevel.world.provided import PARTICIPANT_SIGNALS, PROVIDED_SIGNALS
-from twolevel.world.relations import acceleration, relations
+from twolevel.world.relations import LEAD_HEADING, acceleration, relations, same_way
 from twolevel.world.right_of_way import ZONE_PARTICIPANT_SIGNALS, participant_zone_signals, zone_signals
 from twolevel.world.traffic import RED, YELLOW, TrafficState
 from twolevel.world.world import World
@@ -64,18 +64,6 @@ __all__ = ["PASS_MARGIN", "STOP_ZONE", "LEAD_HEADING", "TrafficLog", "StopMemory
 
 PASS_MARGIN = 5.0  # [m] how far past a stop line it still counts (so running it is visible)
 STOP_ZONE = 3.0  # [m] a stop counts for a stop sign when made at most this far before its line
-LEAD_HEADING = np.pi / 4
-"""[rad] Largest heading difference from the route at which another vehicle still travels the same
-way (a leader, a follower): a lane change or a bend is well within it, a crossing is not."""
-
-
-def same_way(psi: np.ndarray | float, heading: np.ndarray | float) -> np.ndarray:
-    """Whether vehicles heading ``psi`` [rad] travel the way ``heading`` [rad] points: the
-    difference within :data:`LEAD_HEADING` (cos 90° is 6e−17, not 0: a sign test lets a crossing
-    vehicle through)."""
-    return np.cos(np.asarray(psi) - np.asarray(heading)) >= np.cos(LEAD_HEADING)
-
-
 @dataclass(frozen=True, eq=False)
 class TrafficLog:
     """Other vehicles over T steps: x, y [m], psi [rad], v [m/s], active (T, N); boxes (N,) [m]."""
