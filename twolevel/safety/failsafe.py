@@ -41,7 +41,7 @@ from twolevel.models.params import VehicleParams
 from twolevel.models.rollout import Backend, rollout
 from twolevel.world.geometry import Route
 
-__all__ = ["FailSafeSettings", "Manoeuvre", "FailSafe", "manoeuvres", "roll", "brake_rate", "FULL"]
+__all__ = ["FailSafeSettings", "Manoeuvre", "FailSafe", "manoeuvres", "roll", "brake_rate", "return_path", "FULL"]
 
 FULL = math.inf
 """Deceleration level meaning full braking (γ = −1)."""
@@ -71,19 +71,27 @@ class FailSafeSettings:
 class Manoeuvre:
     """One fail-safe to try: ``decel`` [m/s²] braking level (:data:`FULL`), and for a clearing
     one the acceleration ``clear_accel`` [m/s²] held until the centre passes route position
-    ``s_clear`` [m] (None: brake from the start)."""
+    ``s_clear`` [m] (None: brake from the start). A **returning** one (``e_goal`` finite) steers
+    back into the route's lane: its lateral offset follows a smooth step from where it starts to
+    ``e_goal`` [m] between route positions ``s_return`` and ``s_return`` + ``d_return`` [m]
+    (:func:`return_path`)."""
 
     decel: float
     clear_accel: float | None = None
     s_clear: float = -math.inf
+    e_goal: float = math.nan
+    s_return: float = -math.inf
+    d_return: float = 0.0
 
     @property
     def name(self) -> str:
-        """A short label: ``brake 4``, ``brake full``, ``clear +1.5 to 84.0 m, brake 4``."""
+        """A short label: ``brake 4``, ``brake full``, ``clear +1.5 to 84.0 m, brake 4``, with
+        ``, back in lane`` for a returning one."""
         b = "full" if math.isinf(self.decel) else f"{self.decel:g}"
+        back = "" if math.isnan(self.e_goal) else ", back in lane"
         if self.clear_accel is None:
-            return f"brake {b}"
-        return f"clear {self.clear_accel:+g} to {self.s_clear:.1f} m, brake {b}"
+            return f"brake {b}{back}"
+        return f"clear {self.clear_accel:+g} to {self.s_clear:.1f} m, brake {b}{back}"
 
 
 @dataclass(frozen=True, eq=False)
@@ -118,11 +126,19 @@ class FailSafe:
         return self.controls[k].copy() if k < self.steps else self.hold.copy()
 
 
-def manoeuvres(settings: FailSafeSettings, zones: np.ndarray, s0: float, v0: float, brake_full: float) -> list[Manoeuvre]:
+def manoeuvres(settings: FailSafeSettings, zones: np.ndarray, s0: float, v0: float, brake_full: float,
+               back: tuple[float, float] | None = None) -> list[Manoeuvre]:
     """The manoeuvres to try from route position ``s0`` [m] at speed ``v0`` [m/s], in order:
     each braking level, then clearing the first conflict zone (``zones`` (Z, 2) [m] of the centre)
     that the car is in or cannot be sure to stop before (its gentlest braking distance reaches
-    it), with ``brake_full`` [m/s²] the full-braking deceleration."""
+    it), with ``brake_full`` [m/s²] the full-braking deceleration. ``back`` = (e_goal [m], s_past
+    [m]): the car is out of the route's lane (on the oncoming lane, passing): every braking level
+    steers back to lateral offset e_goal while it brakes (behind what it passes), and, when s_past
+    is finite (the route position its centre must pass to be ahead of what it passes), it also
+    completes the pass: keeps its speed (or gains some) past s_past, steers back over the
+    distance a lateral acceleration of ``settings.a_lat_max``/2 needs, then brakes."""
+    if back is not None:
+        return _returning(settings, s0, v0, brake_full, *back)
     out = [Manoeuvre(d) for d in settings.decels]
     gentle = min(settings.decels) if settings.decels else brake_full
     reach = s0 + v0**2 / (2 * min(gentle, brake_full)) + 1.0
@@ -132,6 +148,38 @@ def manoeuvres(settings: FailSafeSettings, zones: np.ndarray, s0: float, v0: flo
         out += [Manoeuvre(b, a, s_clear) for b in settings.clear_brakes for a in settings.clear_accels
                 if not (a <= 0 and v0 < 0.5)]  # keeping a standstill clears nothing
     return out
+
+
+def _returning(settings: FailSafeSettings, s0: float, v0: float, brake_full: float, e_goal: float,
+               s_past: float) -> list[Manoeuvre]:
+    """:func:`manoeuvres` for a car out of the route's lane (its ``back``)."""
+    out = [Manoeuvre(d, e_goal=e_goal, s_return=s0,
+                     d_return=max(v0**2 / (2 * min(brake_full, d)), 0.5)) for d in settings.decels]
+    # slow or standing: creep back, over the distance the steering limit needs for the step
+    d_min = math.sqrt(6.0 * 3.5 * 2.7 / math.tan(0.8 * settings.delta_max))  # a lane's width, wheelbase ~2.7 m
+    out.append(Manoeuvre(min(settings.decels), 1.0, s0 + d_min, e_goal, s0, d_min))
+    if math.isfinite(s_past):
+        v = max(v0, 3.0)
+        d_ret = v * math.sqrt(6.0 * 3.5 / (0.5 * settings.a_lat_max))  # a lane's width back
+        start = max(s_past, s0)
+        out += [Manoeuvre(b, a, start + d_ret, e_goal, start, d_ret) for b in settings.clear_brakes
+                for a in settings.clear_accels]
+    return out
+
+
+def return_path(e_from: np.ndarray, e_goal: np.ndarray, s_return: np.ndarray, d_return: np.ndarray,
+                s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The lateral offset [m] a returning fail-safe follows at route positions ``s`` [m] (rows
+    broadcast with the other arguments' (K, 1)): e_from until ``s_return``, a smooth step
+    (3u² − 2u³) to ``e_goal`` over ``d_return`` [m], then e_goal; with its slope [-] and
+    curvature [1/m] along s. NaN goals give the route's centre line (0, 0, 0)."""
+    u = np.clip((s - s_return) / np.maximum(d_return, 1e-3), 0.0, 1.0)
+    inside = (u > 0.0) & (u < 1.0)
+    delta = np.nan_to_num(e_goal - e_from)
+    e = np.where(np.isnan(e_goal), 0.0, e_from + delta * (3 * u**2 - 2 * u**3))
+    slope = np.where(inside, delta * 6 * u * (1 - u) / np.maximum(d_return, 1e-3), 0.0)
+    curv = np.where(inside, delta * (6 - 12 * u) / np.maximum(d_return, 1e-3) ** 2, 0.0)
+    return e, slope, curv
 
 
 def _wrap(a: np.ndarray) -> np.ndarray:
@@ -164,6 +212,11 @@ def roll(x0: np.ndarray, plan: list[Manoeuvre], route: Route, s0: float, dt: flo
     is_full = np.array([math.isinf(m.decel) for m in plan])
     clear_a = np.array([np.nan if m.clear_accel is None else m.clear_accel for m in plan])
     s_clear = np.array([m.s_clear for m in plan])
+    e_goal = np.array([m.e_goal for m in plan])[:, None]
+    s_ret = np.array([m.s_return for m in plan])[:, None]
+    d_ret = np.array([m.d_return for m in plan])[:, None]
+    returning = ~np.isnan(e_goal[:, 0])
+    e_from: np.ndarray | None = None
     L = params.wheelbase
     n_max = int(math.ceil(st.max_time / dt))
     bucket = max(1, int(round(1.0 / dt)))
@@ -176,6 +229,8 @@ def roll(x0: np.ndarray, plan: list[Manoeuvre], route: Route, s0: float, dt: flo
         v = np.maximum(x[:, 3], 0.0)
         s, e = route.project_near(x[:, :2], s_hint, 5.0 + float(v.max()) * dt)
         e_psi = _wrap(x[:, 2] - route.heading_at(s))
+        if e_from is None:
+            e_from = e.copy()[:, None]
         # the profile: clear (hold clear_a until s_clear), then brake at decel to standstill
         clearing = ~np.isnan(clear_a) & (s < s_clear)
         ca = np.nan_to_num(clear_a)
@@ -188,6 +243,8 @@ def roll(x0: np.ndarray, plan: list[Manoeuvre], route: Route, s0: float, dt: flo
         need = t_c + v_c / decel + 2 * dt
         n = int(min(n_max - done, bucket * math.ceil(float(need[stop_at < 0].max()) / (bucket * dt) + 1e-9)))
         n = max(n, 1)
+        if returning.any():  # steered along a path: closed loop once a second
+            n = min(n, bucket)
         tk = dt * np.arange(n)[None, :]
         in_clear = clearing[:, None] & (tk < t_c[:, None])
         tb = np.maximum(tk - t_c[:, None], 0.0)
@@ -199,9 +256,11 @@ def roll(x0: np.ndarray, plan: list[Manoeuvre], route: Route, s0: float, dt: flo
         a_k = np.where(in_clear, ca[:, None], -decel[:, None])
         gamma = np.where(is_full[:, None] & ~in_clear, -1.0, gamma_from_accel(a_k, v_pred, params))
         # steering: curvature along the profile + Stanley's correction, faded out over a second
-        ff = np.arctan(L * route.curvature_at(np.minimum(s_pred, route.s[-1])))
+        _, _, path_curv = return_path(e_from, e_goal, s_ret, d_ret, s_pred)
+        ff = np.arctan(L * (route.curvature_at(np.minimum(s_pred, route.s[-1])) + path_curv))
         fade = np.clip(1.0 - tk / 1.0, 0.0, 1.0)
-        fb = -(st.k_heading * e_psi + np.arctan2(st.k_lateral * e, v + 1.0))
+        e_path, slope, _ = return_path(e_from[:, 0], e_goal[:, 0], s_ret[:, 0], d_ret[:, 0], s)
+        fb = -(st.k_heading * (e_psi - np.arctan(slope)) + np.arctan2(st.k_lateral * (e - e_path), v + 1.0))
         bound = np.minimum(st.delta_max, np.arctan(st.a_lat_max * L / np.maximum(v_pred**2, 1e-6)))
         delta = np.clip(ff + fb[:, None] * fade, -bound, bound)
         u = np.stack([delta, gamma], axis=-1)  # (K, n, 2)

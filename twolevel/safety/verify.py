@@ -60,8 +60,9 @@ from twolevel.models.obb import box_corners, intersects, rect_axes
 from twolevel.models.params import VehicleParams
 from twolevel.models.rollout import Backend, rollout
 from twolevel.safety.failsafe import FailSafe, FailSafeSettings, brake_rate, manoeuvres, roll
-from twolevel.safety.network import Network, network_of
+from twolevel.safety.network import FOREIGN_TOLERANCE, Network, network_of
 from twolevel.safety.occupancy import Intervals, Occupancy, kind_flags, lane_of, predict
+from twolevel.world.area import drivable_area
 from twolevel.world.traffic import TrafficState
 from twolevel.world.world import World
 
@@ -230,6 +231,36 @@ def _excluded(ctx: Context, traffic: TrafficState, s_ego: float, e_ego: float) -
         behind = hit & (front <= x_ego_rear)
         follower[idx[np.unique(owner[behind])]] = True
     return follower, protected
+
+
+PASS_REACH = 60.0
+"""[m] How far ahead of the ego a vehicle in its lane may be and still be the one it is passing."""
+
+
+def _back(ctx: Context, traffic: TrafficState, s_ego: float, e_ego: float) -> tuple[float, float] | None:
+    """Where a fail-safe must take the ego back to, when at route position ``s_ego`` [m] its
+    lateral offset ``e_ego`` [m] puts it so far out of the route's lane (and the lanes running its
+    way) that standing there would be standing on another lane: (lateral offset of the route
+    lane's centre [m], route position its centre must pass to be ahead of the vehicles in the
+    route's lane it is beside or passing, within :data:`PASS_REACH`, with D_safe to spare; −inf
+    when there are none). None: it is in its lane."""
+    w, m = ctx.world, ctx.settings.margin
+    area = drivable_area(w.lanes, w.route, np.array([s_ego]), oncoming=False)
+    clear = 0.5 * ctx.params.width + m - FOREIGN_TOLERANCE + 0.05
+    lo, hi = float(area.same_lo[0]) + clear, float(area.same_hi[0]) - clear
+    if lo <= e_ego <= hi or lo > hi:
+        return None
+    s_past = -math.inf
+    idx = np.flatnonzero(traffic.active)
+    if len(idx):
+        s_i, e_i = w.route.project_near(traffic.xy[idx], np.full(len(idx), s_ego), PASS_REACH + 10.0)
+        half = 0.5 * float(w.route.width_at(np.array([s_ego]))[0])
+        length = w.parts.length[idx]
+        beside = ((np.abs(e_i) < half + 0.5 * w.parts.width[idx]) & (s_i + length / 2 > s_ego - w.ego.length / 2)
+                  & (s_i - s_ego < PASS_REACH))
+        if beside.any():
+            s_past = float(np.max(s_i[beside] + length[beside] / 2)) + w.ego.length / 2 + w.settings.D_safe
+    return min(max(0.0, lo), hi), s_past
 
 
 @dataclass(frozen=True, eq=False)
@@ -406,7 +437,8 @@ def _verify(ctx: Context, x_start: np.ndarray, prefix: np.ndarray, traffic: Traf
     follower, protected = _excluded(ctx, traffic, *now)
     if pred is None or not np.array_equal(pred.include, ~follower):
         pred = _Prediction(~follower)
-    plan = manoeuvres(st.failsafe, ctx.network.zones, s, max(float(x_start[3]), 0.0), ctx.brake_full)
+    plan = manoeuvres(st.failsafe, ctx.network.zones, s, max(float(x_start[3]), 0.0), ctx.brake_full,
+                      _back(ctx, traffic, s, e))
     refuted: list[Refutation] = []
     for batch in (plan[:1], plan[1:]):  # the gentlest alone (usually enough), then the others together
         if not batch:

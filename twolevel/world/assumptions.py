@@ -68,7 +68,7 @@ from typing import Any, Mapping, Sequence
 
 __all__ = [
     "VEHICLE", "CYCLIST", "PEDESTRIAN", "KIND_NAMES", "MotionBounds", "ResponseBounds", "Assumptions",
-    "VEHICLE_BOUNDS", "CYCLIST_BOUNDS", "PEDESTRIAN_BOUNDS", "RSS_BOUNDS", "safe_distance", "safe_speed",
+    "VEHICLE_BOUNDS", "CYCLIST_BOUNDS", "PEDESTRIAN_BOUNDS", "RSS_BOUNDS", "safe_distance", "opposite_safe_distance", "safe_speed",
     "stopping_speed", "kinds_of", "user_of", "from_spec", "tighter_than_default",
 ]
 
@@ -144,6 +144,20 @@ def safe_distance(v_rear: Any, v_front: Any, r: ResponseBounds = RSS_BOUNDS) -> 
     d = (v_rear * r.time + 0.5 * r.accel_max * r.time**2 + v_resp**2 / (2 * r.brake_min)
          - v_front**2 / (2 * r.brake_max))
     return (d + abs(d)) / 2  # max(0, d), exactly, for numbers and arrays alike
+
+
+def opposite_safe_distance(v_ego: Any, v_other: Any, ego: ResponseBounds = RSS_BOUNDS,
+                           other: ResponseBounds = RSS_BOUNDS) -> Any:
+    """RSS's minimal safe longitudinal gap [m] between two cars driving towards each other at
+    speeds ``v_ego`` and ``v_other`` [m/s] (magnitudes): each responds within its ρ at up to its
+    accel_max, then brakes at its brake_min (Shalev-Shwartz et al. 2017, Def. 4; ``ego``: the one
+    in the other's lane, here the passing ego, ``other``: the oncoming one). Numbers or numpy
+    arrays (elementwise, broadcast)."""
+    def leg(v: Any, r: ResponseBounds) -> Any:
+        v_resp = v + r.time * r.accel_max
+        return 0.5 * (v + v_resp) * r.time + v_resp**2 / (2 * r.brake_min)
+
+    return leg(v_ego, ego) + leg(v_other, other)
 
 
 def safe_speed(gap: float, v_front: float = 0.0, r: ResponseBounds = RSS_BOUNDS) -> float:

@@ -39,6 +39,7 @@ from twolevel.compiler.types import Requirement
 from twolevel.control.codes import MIL515
 from twolevel.control.high_level.backend import Backend, BackendCache
 from twolevel.control.high_level.fallback import fallback_plan
+from twolevel.control.high_level.overtaking import pass_lane
 from twolevel.control.high_level.guards import BESIDE_FROM, Pass
 from twolevel.control.high_level.linearisation import StepData, history_length, prepare_step
 from twolevel.control.high_level.problem import Assembled, StepRules, assemble
@@ -355,4 +356,6 @@ class HighLevelController:
             return p
         side = int(res.mode[0])
         e_front = (rss.left[-1] + rss.right[-1]) / 2  # the passed vehicle's lateral offset
-        return Pass(t + BESIDE_FROM, side, rss.front, e_front + (step.lane_width if side == 1 else -step.lane_width))
+        lane = pass_lane(self.world, float(step.s_bar[-1]), (rss.left[-1], rss.right[-1])[side - 1],
+                         e_front + (step.lane_width if side == 1 else -step.lane_width))
+        return Pass(t + BESIDE_FROM, side, rss.front, lane)

@@ -20,6 +20,7 @@ from typing import Mapping
 
 import numpy as np
 
+from twolevel.control.high_level.overtaking import oncoming_band
 from twolevel.control.high_level.guards import (Pass, RssTerminal, TerminalStop, drivable_band, rss_terminal,
                                                 stop_lines, terminal_stop)
 from twolevel.control.high_level.right_of_way import ZoneConstants, give_way_line, zone_constants
@@ -225,6 +226,8 @@ def prepare_step(
     e_bar = np.einsum("kj,kj->k", n_bar, xs_bar[:, :2] - p_bar)
     if settings.band:  # never narrower than where the ego already is (so the step stays feasible)
         b_lo, b_hi = drivable_band(world, s_bar[1:])
+        if ref.oncoming:  # a pass over the oncoming lane (its gap accepted by the reference)
+            b_lo, b_hi, _ = oncoming_band(world, s_bar[1:])
         e_lo = np.minimum(b_lo, e_bar[0] - 0.05)
         e_hi = np.maximum(b_hi, e_bar[0] + 0.05)
     else:

@@ -19,6 +19,7 @@ import numpy as np
 
 from twolevel.control.high_level.guards import (BESIDE_FROM, LATERAL_MARGIN, Front, Pass, beside_steps,
                                                 drivable_band, free_sides, front_of, stop_lines)
+from twolevel.control.high_level.overtaking import oncoming_band, oncoming_free
 from twolevel.control.high_level.settings import MPCSettings
 from twolevel.control.high_level.steering import steering_reference
 from twolevel.models.params import BicycleParams
@@ -41,7 +42,9 @@ class Reference:
     (:func:`twolevel.control.high_level.guards.front_of`) and whether the ego may pass it,
     ``sides`` (left, right), beside it at ``lateral`` [m] from it at the steps ``beside``,
     ``due`` [s] from now
-    (:func:`twolevel.control.high_level.guards.free_sides`)."""
+    (:func:`twolevel.control.high_level.guards.free_sides`); ``oncoming``: the left pass goes over
+    the oncoming lane, and the lateral band takes it in
+    (:mod:`twolevel.control.high_level.overtaking`)."""
 
     s0: float
     e0: float
@@ -56,6 +59,7 @@ class Reference:
     lateral: float = 0.0
     beside: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
     due: float = 0.0
+    oncoming: bool = False
 
 
 def wrap_to(angle: np.ndarray | float, ref: float) -> np.ndarray:
@@ -160,7 +164,7 @@ def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, set
         s_near = float(min(lines[0], lines[-1]))
         if s0 + d_brake <= s_near + 1e-6:
             s_end = min(s_end, max(s_near - settings.stop_margin, s0))
-    follow, sides, lateral, lane = None, (False, False), 0.0, 0.0
+    follow, sides, lateral, lane, oncoming = None, (False, False), 0.0, 0.0, False
     ticks = np.asarray(settings.ticks)
     times = dt * ticks
     front = front_of(world, hc, passing, s0, dt, ticks) if settings.rss else None
@@ -173,6 +177,9 @@ def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, set
         lo, hi = drivable_band(world, s_ref[beside])
         sides = free_sides(world, hc, front, lateral=lateral, band=(float(lo.max()), float(hi.min())),
                            s=s_ref[beside], v=v_ref[beside], t=times[beside])
+        if not sides[0]:
+            sides, oncoming = _over_oncoming(world, hc, front, sides, lateral=lateral, s0=s0, v0=float(x0[3]),
+                                             s=s_ref[beside], v=v_ref[beside], t=times[beside])
         if passing is not None:  # the side the pass began on, the reference in that lane
             sides = (sides[0] and passing.side == 1, sides[1] and passing.side == 2)
             lane = passing.lane if any(sides) else 0.0
@@ -191,4 +198,20 @@ def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, set
     head = x0[2] + np.concatenate([[0.0], np.cumsum(wrap_to(np.diff(head), 0.0))])
     omega = np.column_stack([pts[1:], head[1:], v_ref[1:]])
     return Reference(s0, float(e_arr[0]), s_ref, v_ref, omega, hc, d_brake, v_brake, front, sides, lateral, beside,
-                     due)
+                     due, oncoming)
+
+
+def _over_oncoming(world: World, hc: HorizonConstants, front: Front, sides: tuple[bool, bool], *, lateral: float,
+                   s0: float, v0: float, s: np.ndarray, v: np.ndarray, t: np.ndarray) -> tuple[tuple[bool, bool], bool]:
+    """The sides on which the ego may pass ``front`` when the oncoming lane is taken in: the left
+    one too where the band with the oncoming lane reaches beside it at route positions ``s`` [m]
+    (speeds ``v`` [m/s], times ``t`` [s]; :func:`free_sides`) and the oncoming lane is free for
+    the pass (:func:`~twolevel.control.high_level.overtaking.oncoming_free`); and whether that
+    pass goes over the oncoming lane."""
+    lo, hi, open_ = oncoming_band(world, s)
+    if not open_.all():
+        return sides, False
+    left = free_sides(world, hc, front, lateral=lateral, band=(float(lo.max()), float(hi.min())), s=s, v=v, t=t)[0]
+    if not (left and oncoming_free(world, hc, front, s0, v0)):
+        return sides, False
+    return (True, sides[1]), True

@@ -1,0 +1,140 @@
+"""Passing over the oncoming lane: where the MPC's lateral band may take in the oncoming lane, and
+whether the oncoming lane is free for as long as a pass needs.
+
+The pass itself is the RSS terminal's *passing on the left* disjunct
+(:func:`twolevel.control.high_level.guards.rss_terminal`): a binary of the MILP, beside the
+vehicle ahead from :data:`~twolevel.control.high_level.guards.BESIDE_FROM` on, carried from plan to
+plan (:class:`~twolevel.control.high_level.guards.Pass`) until the ego is past it, then the
+reference returns to the route's lane. This module makes that disjunct available over the
+oncoming lane:
+
+* :func:`oncoming_band` — the lateral offsets [m] the ego's reference point may take when the
+  oncoming lane is open to it: the drivable area's outer bounds
+  (:func:`twolevel.world.area.drivable_area`: the first lane running against the route, where
+  the boundary is crossable from the route's lane — none, dashed, dashed_solid — and outside the
+  no-overtaking zones), less half the ego's width.
+* :func:`pass_time` — how long the ego occupies the oncoming lane to pass the vehicle ahead and
+  return in front of it: from its speed now, accelerating at the comfort acceleration up to the
+  desired speed, until its rear is the vehicle's RSS distance (as a follower of the ego, the
+  others' response) plus D_safe ahead of its front, plus the time of the lane change back.
+* :func:`oncoming_free` — the **gap acceptance**: every vehicle sensed in the oncoming lane ahead
+  must be farther than the ego travels in that time, plus what it travels (its speed, against the
+  route) in that time, plus RSS's safe distance between cars driving towards each other
+  (:func:`twolevel.world.assumptions.opposite_safe_distance`: the ego's response as the one out of
+  its lane, the assumed response of the other); a vehicle standing in the oncoming lane within
+  the stretch blocks it; and, since a vehicle beyond the sensing range is unknown, one just
+  beyond it at the assumptions' speed bound must satisfy the same (so a pass needs a sensing
+  range that covers it). The ego's speed during the pass is the desired speed.
+
+The safety layer holds the claim while the ego is out of its lane: its fail-safes from there
+steer back into the route's lane, by braking behind the vehicle or by completing the pass
+(:mod:`twolevel.safety.failsafe`), verified against the oncoming traffic's occupancy.
+
+Units: m, s, m/s, m/s².
+"""
+
+from __future__ import annotations
+
+import math
+import weakref
+
+import numpy as np
+
+from twolevel.control.high_level.guards import Front, drivable_band
+from twolevel.world.area import drivable_area
+from twolevel.world.assumptions import opposite_safe_distance, safe_distance
+from twolevel.world.signals import HorizonConstants
+from twolevel.world.world import World
+
+__all__ = ["oncoming_band", "pass_lane", "pass_time", "oncoming_free", "LANE_CHANGE_TIME"]
+
+LANE_CHANGE_TIME = 2.0
+"""[s] The time a lane change back into the route's lane takes (as :data:`BESIDE_FROM` allows for
+the change out)."""
+
+_TABLES: "weakref.WeakKeyDictionary[object, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]" = \
+    weakref.WeakKeyDictionary()
+
+
+def _table(world: World, spacing: float = 2.0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(s, lo, hi, oncoming) on a coarse grid along the route, once per world."""
+    hit = _TABLES.get(world.route)
+    if hit is not None:
+        return hit
+    s = np.arange(0.0, float(world.route.s[-1]) + spacing, spacing)
+    area = drivable_area(world.lanes, world.route, s, oncoming=True)
+    half = 0.5 * world.ego.width
+    out = (s, area.lo + half, area.hi - half, area.oncoming)
+    _TABLES[world.route] = out
+    return out
+
+
+def oncoming_band(world: World, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Lateral bounds (lo, hi) [m] (+ left) of the ego's reference point at route positions ``s``
+    [m] with the oncoming lane where passing over it is allowed (the tighter of the two
+    neighbouring grid points; elsewhere :func:`drivable_band`'s), and whether the oncoming lane
+    is open there (both points)."""
+    grid, lo, hi, onc = _table(world)
+    i = np.clip(np.searchsorted(grid, np.asarray(s, float)), 1, len(grid) - 1)
+    open_ = onc[i - 1] & onc[i]
+    b_lo, b_hi = drivable_band(world, s)
+    return (np.where(open_, np.maximum(lo[i - 1], lo[i]), b_lo), np.where(open_, np.minimum(hi[i - 1], hi[i]), b_hi),
+            open_)
+
+
+def pass_lane(world: World, s: float, beside: float, next_lane: float) -> float:
+    """The lateral offset [m] the reference runs at while the ego passes a vehicle, beside it at
+    ``beside`` [m]: the centre of the next lane
+    ``next_lane`` [m], within the band the pass is in — the same-direction band when ``beside``
+    lies in it (a pass within the lane, or into a lane running the route's way), else the band
+    with the oncoming lane — at route position ``s`` [m]. (A reference in a lane the band leaves
+    out pulls the plan against the band's edge.)"""
+    lo, hi = (float(b[0]) for b in drivable_band(world, np.array([s])))
+    if not lo <= beside <= hi:
+        lo, hi, _ = (float(b[0]) for b in oncoming_band(world, np.array([s])))
+    lo, hi = min(lo, beside), max(hi, beside)
+    return min(max(next_lane, lo), hi)
+
+
+def pass_time(world: World, front: Front, s0: float, v0: float) -> tuple[float, float, float]:
+    """(T [s], distance [m], speed [m/s]): how long the ego at route position ``s0`` [m] and speed
+    ``v0`` [m/s] is out of its lane to pass ``front`` (module docstring), how far it travels
+    meanwhile and its speed at the end; T = inf when it cannot get past within 60 s."""
+    a = world.settings.comfort.accel
+    v_des = float(world.route.desired_speed_at(s0))
+    t = np.arange(0.0, 60.0, 0.1)
+    t_top = max(v_des - v0, 0.0) / a
+    v = np.where(t < t_top, v0 + a * t, max(v_des, v0))
+    x = np.where(t < t_top, v0 * t + 0.5 * a * t**2, v0 * t_top + 0.5 * a * t_top**2 + max(v_des, v0) * (t - t_top))
+    ahead = safe_distance(front.v, v, world.assumptions.response) + world.settings.D_safe
+    need = front.s[0] - s0 + 2.0 * front.offset + ahead + front.v * t
+    done = np.flatnonzero(x >= need)
+    if not len(done):
+        return math.inf, math.inf, float(v[-1])
+    k = int(done[0])
+    T = float(t[k]) + LANE_CHANGE_TIME
+    return T, float(x[k] + v[k] * LANE_CHANGE_TIME), float(v[k])
+
+
+def oncoming_free(world: World, hc: HorizonConstants, front: Front, s0: float, v0: float) -> bool:
+    """Whether the oncoming lane is free for the pass of ``front`` from route position ``s0`` [m]
+    at speed ``v0`` [m/s] (module docstring: sensed vehicles, standing ones, and one unseen just
+    beyond the sensing range)."""
+    T, travel, v_pass = pass_time(world, front, s0, v0)
+    if not math.isfinite(T):
+        return False
+    st = world.settings
+    width = float(world.route.width_at(s0))
+    ego_resp, other_resp = st.response, world.assumptions.response
+    lane = (hc.seen_e > width / 2) & (hc.seen_e < 1.5 * width) & (hc.seen != front.index)
+    dist = hc.seen_s[lane] - s0 - (world.ego.length + world.parts.length[hc.seen[lane]]) / 2
+    speed = np.maximum(-hc.seen_v[lane], 0.0)  # towards the ego [m/s]
+    moving = speed > 0.1
+    need = travel + speed * T + opposite_safe_distance(v_pass, speed, ego_resp, other_resp)
+    if np.any(moving & (dist > -world.ego.length) & (dist < need)):
+        return False
+    if np.any(~moving & (dist > -world.ego.length) & (dist < travel + st.D_safe)):
+        return False
+    cap = world.assumptions.vehicle.speed_cap(float(world.route.limit_at(s0)))
+    unseen = travel + cap * T + float(opposite_safe_distance(v_pass, cap, ego_resp, other_resp))
+    return unseen <= max(st.sensor_range, st.r_near)
