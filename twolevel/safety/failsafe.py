@@ -74,7 +74,8 @@ class Manoeuvre:
     ``s_clear`` [m] (None: brake from the start). A **returning** one (``e_goal`` finite) steers
     back into the route's lane: its lateral offset follows a smooth step from where it starts to
     ``e_goal`` [m] between route positions ``s_return`` and ``s_return`` + ``d_return`` [m]
-    (:func:`return_path`)."""
+    — after first moving out to ``e_out`` [m] (beside what it passes; NaN: not) between
+    ``s_out`` and ``s_out`` + ``d_out`` [m] (:func:`return_path`)."""
 
     decel: float
     clear_accel: float | None = None
@@ -82,6 +83,9 @@ class Manoeuvre:
     e_goal: float = math.nan
     s_return: float = -math.inf
     d_return: float = 0.0
+    e_out: float = math.nan
+    s_out: float = -math.inf
+    d_out: float = 0.0
 
     @property
     def name(self) -> str:
@@ -127,16 +131,18 @@ class FailSafe:
 
 
 def manoeuvres(settings: FailSafeSettings, zones: np.ndarray, s0: float, v0: float, brake_full: float,
-               back: tuple[float, float] | None = None) -> list[Manoeuvre]:
+               back: tuple[float, float, float] | None = None) -> list[Manoeuvre]:
     """The manoeuvres to try from route position ``s0`` [m] at speed ``v0`` [m/s], in order:
     each braking level, then clearing the first conflict zone (``zones`` (Z, 2) [m] of the centre)
     that the car is in or cannot be sure to stop before (its gentlest braking distance reaches
     it), with ``brake_full`` [m/s²] the full-braking deceleration. ``back`` = (e_goal [m], s_past
-    [m]): the car is out of the route's lane (on the oncoming lane, passing): every braking level
-    steers back to lateral offset e_goal while it brakes (behind what it passes), and, when s_past
-    is finite (the route position its centre must pass to be ahead of what it passes), it also
-    completes the pass: keeps its speed (or gains some) past s_past, steers back over the
-    distance a lateral acceleration of ``settings.a_lat_max``/2 needs, then brakes."""
+    [m], e_beside [m]): the car is out of the route's lane (on the oncoming lane, passing): every
+    braking level steers back to lateral offset e_goal while it brakes (behind what it passes),
+    a creep at 1 m/s² steers back over the length the steering limit needs, and, when s_past is
+    finite (the route position its centre must pass to be ahead of what it passes), it also
+    completes the pass: keeps its speed (or gains some) while it moves out to e_beside (beside
+    what it passes) and past s_past, steers back over the distance a lateral acceleration of
+    ``settings.a_lat_max``/2 needs, then brakes."""
     if back is not None:
         return _returning(settings, s0, v0, brake_full, *back)
     out = [Manoeuvre(d) for d in settings.decels]
@@ -151,7 +157,7 @@ def manoeuvres(settings: FailSafeSettings, zones: np.ndarray, s0: float, v0: flo
 
 
 def _returning(settings: FailSafeSettings, s0: float, v0: float, brake_full: float, e_goal: float,
-               s_past: float) -> list[Manoeuvre]:
+               s_past: float, e_beside: float) -> list[Manoeuvre]:
     """:func:`manoeuvres` for a car out of the route's lane (its ``back``)."""
     out = [Manoeuvre(d, e_goal=e_goal, s_return=s0,
                      d_return=max(v0**2 / (2 * min(brake_full, d)), 0.5)) for d in settings.decels]
@@ -162,24 +168,38 @@ def _returning(settings: FailSafeSettings, s0: float, v0: float, brake_full: flo
         v = max(v0, 3.0)
         d_ret = v * math.sqrt(6.0 * 3.5 / (0.5 * settings.a_lat_max))  # a lane's width back
         start = max(s_past, s0)
-        out += [Manoeuvre(b, a, start + d_ret, e_goal, start, d_ret) for b in settings.clear_brakes
-                for a in settings.clear_accels]
+        d_out = min(d_ret, max(0.6 * (start - s0), 0.5))  # out beside it before its rear
+        out += [Manoeuvre(b, a, start + d_ret, e_goal, start, d_ret, e_beside, s0, d_out)
+                for b in settings.clear_brakes for a in settings.clear_accels]
     return out
 
 
-def return_path(e_from: np.ndarray, e_goal: np.ndarray, s_return: np.ndarray, d_return: np.ndarray,
-                s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The lateral offset [m] a returning fail-safe follows at route positions ``s`` [m] (rows
-    broadcast with the other arguments' (K, 1)): e_from until ``s_return``, a smooth step
-    (3u² − 2u³) to ``e_goal`` over ``d_return`` [m], then e_goal; with its slope [-] and
-    curvature [1/m] along s. NaN goals give the route's centre line (0, 0, 0)."""
-    u = np.clip((s - s_return) / np.maximum(d_return, 1e-3), 0.0, 1.0)
+def _smooth_step(s: np.ndarray, start: np.ndarray, length: np.ndarray, rise: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``rise`` · (3u² − 2u³), u = (s − start)/length clipped to [0, 1], with its first and second
+    derivatives along s."""
+    d = np.maximum(length, 1e-3)
+    u = np.clip((s - start) / d, 0.0, 1.0)
     inside = (u > 0.0) & (u < 1.0)
-    delta = np.nan_to_num(e_goal - e_from)
-    e = np.where(np.isnan(e_goal), 0.0, e_from + delta * (3 * u**2 - 2 * u**3))
-    slope = np.where(inside, delta * 6 * u * (1 - u) / np.maximum(d_return, 1e-3), 0.0)
-    curv = np.where(inside, delta * (6 - 12 * u) / np.maximum(d_return, 1e-3) ** 2, 0.0)
-    return e, slope, curv
+    return (rise * (3 * u**2 - 2 * u**3), np.where(inside, rise * 6 * u * (1 - u) / d, 0.0),
+            np.where(inside, rise * (6 - 12 * u) / d**2, 0.0))
+
+
+def return_path(e_from: np.ndarray, path: tuple[np.ndarray, ...], s: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The lateral offset [m] a returning fail-safe follows at route positions ``s`` [m] (rows
+    broadcast with ``e_from`` [m], where it starts, and the arrays of ``path`` = (e_out, s_out,
+    d_out, e_goal, s_return, d_return), each of the manoeuvres' fields): a smooth step out to
+    e_out over [s_out, s_out + d_out] (none where e_out is NaN), then one to ``e_goal`` over
+    [s_return, s_return + d_return]; with its slope [-] and curvature [1/m] along s. NaN goals give
+    the route's centre line (0, 0, 0)."""
+    e_out, s_out, d_out, e_goal, s_ret, d_ret = path
+    out = ~np.isnan(e_out)
+    mid = np.where(out, e_out, e_from)
+    e1, g1, c1 = _smooth_step(s, s_out, d_out, np.where(out, e_out - e_from, 0.0))
+    e2, g2, c2 = _smooth_step(s, s_ret, d_ret, np.nan_to_num(e_goal - mid))
+    none = np.isnan(e_goal)
+    return (np.where(none, 0.0, e_from + e1 + e2), np.where(none, 0.0, g1 + g2), np.where(none, 0.0, c1 + c2))
 
 
 def _wrap(a: np.ndarray) -> np.ndarray:
@@ -212,10 +232,9 @@ def roll(x0: np.ndarray, plan: list[Manoeuvre], route: Route, s0: float, dt: flo
     is_full = np.array([math.isinf(m.decel) for m in plan])
     clear_a = np.array([np.nan if m.clear_accel is None else m.clear_accel for m in plan])
     s_clear = np.array([m.s_clear for m in plan])
-    e_goal = np.array([m.e_goal for m in plan])[:, None]
-    s_ret = np.array([m.s_return for m in plan])[:, None]
-    d_ret = np.array([m.d_return for m in plan])[:, None]
-    returning = ~np.isnan(e_goal[:, 0])
+    path = tuple(np.array([getattr(m, f) for m in plan])
+                 for f in ("e_out", "s_out", "d_out", "e_goal", "s_return", "d_return"))
+    returning = ~np.isnan(path[3])
     e_from: np.ndarray | None = None
     L = params.wheelbase
     n_max = int(math.ceil(st.max_time / dt))
@@ -243,8 +262,8 @@ def roll(x0: np.ndarray, plan: list[Manoeuvre], route: Route, s0: float, dt: flo
         need = t_c + v_c / decel + 2 * dt
         n = int(min(n_max - done, bucket * math.ceil(float(need[stop_at < 0].max()) / (bucket * dt) + 1e-9)))
         n = max(n, 1)
-        if returning.any():  # steered along a path: closed loop once a second
-            n = min(n, bucket)
+        if returning.any():  # steered along a path: closed loop twice a second
+            n = min(n, max(1, bucket // 2))
         tk = dt * np.arange(n)[None, :]
         in_clear = clearing[:, None] & (tk < t_c[:, None])
         tb = np.maximum(tk - t_c[:, None], 0.0)
@@ -256,10 +275,10 @@ def roll(x0: np.ndarray, plan: list[Manoeuvre], route: Route, s0: float, dt: flo
         a_k = np.where(in_clear, ca[:, None], -decel[:, None])
         gamma = np.where(is_full[:, None] & ~in_clear, -1.0, gamma_from_accel(a_k, v_pred, params))
         # steering: curvature along the profile + Stanley's correction, faded out over a second
-        _, _, path_curv = return_path(e_from, e_goal, s_ret, d_ret, s_pred)
+        _, _, path_curv = return_path(e_from, tuple(p[:, None] for p in path), s_pred)
         ff = np.arctan(L * (route.curvature_at(np.minimum(s_pred, route.s[-1])) + path_curv))
         fade = np.clip(1.0 - tk / 1.0, 0.0, 1.0)
-        e_path, slope, _ = return_path(e_from[:, 0], e_goal[:, 0], s_ret[:, 0], d_ret[:, 0], s)
+        e_path, slope, _ = return_path(e_from[:, 0], path, s)
         fb = -(st.k_heading * (e_psi - np.arctan(slope)) + np.arctan2(st.k_lateral * (e - e_path), v + 1.0))
         bound = np.minimum(st.delta_max, np.arctan(st.a_lat_max * L / np.maximum(v_pred**2, 1e-6)))
         delta = np.clip(ff + fb[:, None] * fade, -bound, bound)

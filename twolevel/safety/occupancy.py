@@ -282,12 +282,14 @@ def kind_flags(assumptions: Assumptions, kinds: np.ndarray, name: str) -> np.nda
 
 def predict(net: Network, traffic: TrafficState, t: float, intervals: Intervals, assumptions: Assumptions,
             kinds: np.ndarray, include: np.ndarray | None = None,
-            roi: tuple[np.ndarray, np.ndarray] | None = None) -> Occupancy:
+            roi: tuple[np.ndarray, np.ndarray] | None = None, hold: np.ndarray | None = None) -> Occupancy:
     """The occupancy of the participants (active, and ``include`` (N,) if given) over
     ``intervals`` from the traffic at absolute time ``t`` [s]; ``kinds`` (N,) their kinds of road
     user (:func:`~twolevel.world.assumptions.kinds_of`). With ``roi`` = (centres (J, 2) [m],
     radii (J,) [m]) only the pieces that may reach the circle of their interval are kept (bounding
-    circles of whole stretches are tested before the stretches are cut into pieces)."""
+    circles of whole stretches are tested before the stretches are cut into pieces). ``hold``
+    (N,): participants being overtaken, whose speed stays at most what it is
+    (:mod:`twolevel.world.assumptions`)."""
     mask = traffic.active.copy()
     if include is not None:
         mask &= include
@@ -307,6 +309,8 @@ def predict(net: Network, traffic: TrafficState, t: float, intervals: Intervals,
     li = np.maximum(lane, 0)
     per_tree = lambda name: np.where(changes, getattr(net.change, name)[li], getattr(net.keep, name)[li])  # noqa: E731
     v_cap = np.maximum(v0, np.minimum(v_max, factor * per_tree("limit")))
+    if hold is not None:
+        v_cap = np.where(np.asarray(hold)[idx], v0, v_cap)
     stretch, shrink = per_tree("stretch"), per_tree("shrink")
     ahead, behind, extra = _body_on_lane(net, li, s0, traffic, idx)
     front0, rear0 = s0 + ahead, s0 - behind

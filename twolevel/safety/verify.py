@@ -178,10 +178,12 @@ def context(world: World, params: VehicleParams | None = None, settings: VerifyS
 @dataclass
 class _Prediction:
     """The occupancy computed so far in one verification, for the participants ``include`` (N,)
+    (``hold`` (N,): those being overtaken, who do not speed up, :func:`_back`)
     and the region of interest ``roi`` (a circle per interval) it was cut to; recomputed when a
     trajectory needs a longer horizon or leaves the region."""
 
     include: np.ndarray
+    hold: np.ndarray | None = None
     occ: Occupancy | None = None
     roi: tuple[np.ndarray, np.ndarray] | None = None
     ms: float = 0.0
@@ -236,21 +238,41 @@ def _excluded(ctx: Context, traffic: TrafficState, s_ego: float, e_ego: float) -
 PASS_REACH = 60.0
 """[m] How far ahead of the ego a vehicle in its lane may be and still be the one it is passing."""
 
+PASS_CLEARANCE = 0.5
+"""[m] Lateral clearance between the bodies of a fail-safe that completes a pass and what it passes."""
 
-def _back(ctx: Context, traffic: TrafficState, s_ego: float, e_ego: float) -> tuple[float, float] | None:
+
+def _same(a: np.ndarray | None, b: np.ndarray | None) -> bool:
+    return (a is None and b is None) or (a is not None and b is not None and np.array_equal(a, b))
+
+
+def _back(ctx: Context, traffic: TrafficState, s_ego: float, e_ego: float, psi: float
+          ) -> tuple[float, float, float, np.ndarray] | None:
     """Where a fail-safe must take the ego back to, when at route position ``s_ego`` [m] its
-    lateral offset ``e_ego`` [m] puts it so far out of the route's lane (and the lanes running its
-    way) that standing there would be standing on another lane: (lateral offset of the route
-    lane's centre [m], route position its centre must pass to be ahead of the vehicles in the
-    route's lane it is beside or passing, within :data:`PASS_REACH`, with D_safe to spare; −inf
-    when there are none). None: it is in its lane."""
+    lateral offset ``e_ego`` [m] and heading ``psi`` [rad] put its box so far out of the route's
+    lane (and the lanes running its way) that standing there would be standing on another lane:
+    (lateral offset of the route lane's centre [m], route position its centre must pass to be
+    ahead of the vehicles in the route's lane it is beside or passing, within
+    :data:`PASS_REACH`, with D_safe to spare, −inf when there are none; the lateral offset [m]
+    beside them on the ego's side, with :data:`PASS_CLEARANCE`, NaN when none; which
+    participants (N,) they are: being overtaken, they do not speed up — the Vienna Convention on
+    Road Traffic, art. 11(3), as the assumptions state, :mod:`twolevel.world.assumptions`). None: it
+    is in its lane."""
     w, m = ctx.world, ctx.settings.margin
     area = drivable_area(w.lanes, w.route, np.array([s_ego]), oncoming=False)
-    clear = 0.5 * ctx.params.width + m - FOREIGN_TOLERANCE + 0.05
-    lo, hi = float(area.same_lo[0]) + clear, float(area.same_hi[0]) - clear
-    if lo <= e_ego <= hi or lo > hi:
+    rel = float(psi - w.route.heading_at(np.array([s_ego]))[0])
+    extent = 0.5 * (ctx.params.length * abs(math.sin(rel)) + ctx.params.width * abs(math.cos(rel)))
+    lo, hi = float(area.same_lo[0]), float(area.same_hi[0])
+    slack = m - FOREIGN_TOLERANCE + 0.05
+    if lo + extent + slack <= e_ego <= hi - extent - slack:
         return None
-    s_past = -math.inf
+    clear = 0.5 * ctx.params.width + slack
+    lo, hi = lo + clear, hi - clear
+    if lo > hi:
+        return None
+    s_past, e_beside = -math.inf, math.nan
+    passed = np.zeros(len(traffic.x), dtype=bool)
+    side = 1.0 if e_ego >= 0 else -1.0
     idx = np.flatnonzero(traffic.active)
     if len(idx):
         s_i, e_i = w.route.project_near(traffic.xy[idx], np.full(len(idx), s_ego), PASS_REACH + 10.0)
@@ -260,7 +282,11 @@ def _back(ctx: Context, traffic: TrafficState, s_ego: float, e_ego: float) -> tu
                   & (s_i - s_ego < PASS_REACH))
         if beside.any():
             s_past = float(np.max(s_i[beside] + length[beside] / 2)) + w.ego.length / 2 + w.settings.D_safe
-    return min(max(0.0, lo), hi), s_past
+            reach = e_i[beside] + side * (0.5 * (w.parts.width[idx][beside] + ctx.params.width) + PASS_CLEARANCE)
+            out = half + 0.5 * ctx.params.width + m + 0.05  # wholly out of the lane (its occupancy spans it)
+            e_beside = float(side * max(float(np.max(side * reach)), out))
+            passed[idx[beside]] = True
+    return min(max(0.0, lo), hi), s_past, e_beside, passed
 
 
 @dataclass(frozen=True, eq=False)
@@ -406,7 +432,8 @@ def _predict(ctx: Context, pred: _Prediction, traffic: TrafficState, t: float, t
     if brake_from is not None:
         circles.append(_envelope(ctx, iv, brake_from))
     roi = _union(iv, circles)
-    pred.occ = predict(ctx.network, traffic, t, iv, ctx.world.assumptions, ctx.kinds, pred.include, roi)
+    pred.occ = predict(ctx.network, traffic, t, iv, ctx.world.assumptions, ctx.kinds, pred.include, roi,
+                       hold=pred.hold)
     pred.roi = roi
     pred.ms += (time.perf_counter() - t0) * 1e3
     return pred.occ, sweeps
@@ -435,10 +462,12 @@ def _verify(ctx: Context, x_start: np.ndarray, prefix: np.ndarray, traffic: Traf
     s, e = _route_state(ctx, x_start, s_hint)
     now = _route_state(ctx, prefix[0], s_hint) if len(prefix) else (s, e)
     follower, protected = _excluded(ctx, traffic, *now)
-    if pred is None or not np.array_equal(pred.include, ~follower):
-        pred = _Prediction(~follower)
+    back = _back(ctx, traffic, s, e, float(x_start[2]))
+    hold = None if back is None else back[3]
+    if pred is None or not np.array_equal(pred.include, ~follower) or not _same(pred.hold, hold):
+        pred = _Prediction(~follower, hold)
     plan = manoeuvres(st.failsafe, ctx.network.zones, s, max(float(x_start[3]), 0.0), ctx.brake_full,
-                      _back(ctx, traffic, s, e))
+                      None if back is None else back[:3])
     refuted: list[Refutation] = []
     for batch in (plan[:1], plan[1:]):  # the gentlest alone (usually enough), then the others together
         if not batch:

@@ -27,6 +27,10 @@ on arbitrary road networks", IEEE T-IV 2016 — SPOT's published defaults):
   ``red_lights``: its front does not cross a light's line while the light is red, unless it
   cannot stop before it (Koschi & Althoff, "Set-based prediction of traffic participants
   considering occlusions and traffic rules", IEEE T-IV 2021: traffic rules as constraints).
+* being overtaken, it does not speed up (Vienna Convention on Road Traffic 1968, art. 11(3):
+  "every driver who is being overtaken shall ... not accelerate"; German StVO §5(6)): while the
+  ego is out of its lane passing it, its speed stays at most what it is
+  (:mod:`twolevel.safety.verify`, ``hold`` in :func:`twolevel.safety.occupancy.predict`).
 
 **Cyclists**: the vehicle model with their own bounds. No set-based source gives them; our
 choice: v_max = 12.5 m/s (45 km/h, the assisted top speed of the fastest e-bikes, S-pedelecs),

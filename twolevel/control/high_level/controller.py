@@ -40,7 +40,7 @@ from twolevel.control.codes import MIL515
 from twolevel.control.high_level.backend import Backend, BackendCache
 from twolevel.control.high_level.fallback import fallback_plan
 from twolevel.control.high_level.overtaking import pass_lane
-from twolevel.control.high_level.guards import BESIDE_FROM, Pass
+from twolevel.control.high_level.guards import Pass
 from twolevel.control.high_level.linearisation import StepData, history_length, prepare_step
 from twolevel.control.high_level.problem import Assembled, StepRules, assemble
 from twolevel.control.high_level.robustness import plan_robustness
@@ -358,4 +358,4 @@ class HighLevelController:
         e_front = (rss.left[-1] + rss.right[-1]) / 2  # the passed vehicle's lateral offset
         lane = pass_lane(self.world, float(step.s_bar[-1]), (rss.left[-1], rss.right[-1])[side - 1],
                          e_front + (step.lane_width if side == 1 else -step.lane_width))
-        return Pass(t + BESIDE_FROM, side, rss.front, lane)
+        return Pass(t + rss.due, side, rss.front, lane)

@@ -263,7 +263,8 @@ class RssTerminal:
     the ego may pass there, :func:`free_sides`). ``front``: the vehicle's participant index (−1:
     none, and every disjunct holds). ``rule`` (H, 2): the chord (slope [s], intercept [m]) of
     RSS's distance to the world's vehicle ahead over each fine step's reachable speeds, for the
-    ``rss_gap`` signal (NaN: none), and ``gap0`` [m]: ``rss_gap`` now."""
+    ``rss_gap`` signal (NaN: none), ``gap0`` [m]: ``rss_gap`` now, and ``due`` [s]: when from now
+    the ego is to be beside the vehicle."""
 
     slope: np.ndarray
     bound: np.ndarray
@@ -273,6 +274,7 @@ class RssTerminal:
     front: int
     rule: np.ndarray
     gap0: float = float("inf")
+    due: float = BESIDE_FROM
 
     @property
     def active(self) -> bool:
@@ -282,7 +284,7 @@ class RssTerminal:
 def rss_terminal(hc: HorizonConstants, front: Front | None, response: ResponseBounds, *, s0: float, v0: float,
                  steps: np.ndarray, H: int, v_lo: np.ndarray, v_hi: np.ndarray, v_bar: np.ndarray, margin: float,
                  a_min: float, lateral: float, sides: tuple[bool, bool], beside: np.ndarray, e0: float, due: float,
-                 chords: int = 3) -> RssTerminal:
+                 chords: int = 3, early: float | None = None) -> RssTerminal:
     """The terminal disjunction of the module docstring's *can stop behind the vehicle ahead*
     (``front``, :func:`front_of`) for a look-ahead of ``steps`` (N,) [s] from the ego at route
     position ``s0`` [m] and speed ``v0`` [m/s]: ``v_lo``/``v_hi`` (N,) [m/s] bound the speeds
@@ -291,8 +293,9 @@ def rss_terminal(hc: HorizonConstants, front: Front | None, response: ResponseBo
     offset from the front's that counts as beside it, ``sides`` (left, right) whether being
     beside is allowed (:func:`free_sides`), ``beside`` the steps at which it is required
     (:func:`beside_steps`), ``e0`` [m] the ego's lateral offset now and ``due`` [s] the time
-    from now it is due there. The ``rss_gap`` signal's chords are of the world's vehicle ahead
-    (``hc``)."""
+    from now it is due there; ``early``: the share of the way there required at the last fine
+    step (None: in proportion to the time left). The ``rss_gap`` signal's chords are of the
+    world's vehicle ahead (``hc``)."""
     N = len(steps)
     rule, gap0 = np.full((H, 2), np.nan), float("inf")
     if hc.ahead >= 0:  # the signal's vehicle: the world's (rss_gap)
@@ -329,6 +332,7 @@ def rss_terminal(hc: HorizonConstants, front: Front | None, response: ResponseBo
         at = np.full(N, np.nan)
         at[beside - 1] = e_side
         if H not in beside:  # on the way there by the end of the fine part, as far as the time allows
-            at[H - 1] = e0 + (e_side - e0) * min(1.0, H * steps[0] / max(due, 1e-9))
+            share = min(1.0, H * steps[0] / max(due, 1e-9)) if early is None else early
+            at[H - 1] = e0 + (e_side - e0) * share
         side.append(at)
-    return RssTerminal(slope, bound, side[0], side[1], sides, front.index, rule, gap0)
+    return RssTerminal(slope, bound, side[0], side[1], sides, front.index, rule, gap0, due)

@@ -200,7 +200,7 @@ def prepare_step(
         xs_bar = bicycle.rollout(x0, us_bar, steps, params)
         if u_prev is None and prev is not None:
             u_prev = prev.controls[0]
-    elif prev is not None and about == "plan":
+    elif prev is not None and about == "plan" and not (ref.oncoming and passing is None and x0[3] < PASS_FROM_REST):
         xs_bar, us_bar = shifted(prev, x0, periods, dt, params)
         if u_prev is None:
             u_prev = prev.controls[0]
@@ -248,13 +248,19 @@ def prepare_step(
         v_lo = np.maximum(float(x0[3]) + params.a_min * dt * ticks[1:], 0.0)
         rss = rss_terminal(hc, ref.front, ws.response, s0=s0, v0=float(x0[3]), steps=steps, H=H, v_lo=v_lo, v_hi=hi[:, 3],
                            v_bar=xs_bar[1:, 3], margin=ws.D_safe, a_min=params.a_min, lateral=ref.lateral,
-                           sides=ref.sides, beside=ref.beside, e0=ref.e0, due=ref.due)
+                           sides=ref.sides, beside=ref.beside, e0=ref.e0, due=ref.due, early=ref.early)
     kappa = route.curvature_at(s_ref[:-1])
     v_bar = np.maximum(xs_bar[:-1, 3], x0[3])
     steer_weight = steering_weight(v_bar, params.l_f) if settings.lateral_weight else None
     return StepData(t, x0, np.asarray(u_prev, float), xs_bar, us_bar, A, B, c, omega, s_ref, s_bar, h_bar, p_bar,
                     lo, hi, hc, width, e_lo, e_hi, term, steering_bound(v_bar, kappa, params), steps, H, rss,
                     steering_reference(kappa, params) if settings.lateral_weight else None, steer_weight, zones)
+
+
+PASS_FROM_REST = 3.0
+"""[m/s] Below this speed a pass over the oncoming lane that begins now is linearised about the
+reference, which drives off, not about the previous plan, which stood (about a standing plan the
+linear model cannot move sideways, and the pass is never chosen)."""
 
 
 def history_length(history: Mapping[str, np.ndarray] | None, names: set[str], depth: int) -> int:

@@ -40,13 +40,15 @@ import weakref
 
 import numpy as np
 
-from twolevel.control.high_level.guards import Front, drivable_band
+from twolevel.control.high_level.guards import BESIDE_FROM, Front, drivable_band
+from twolevel.models.params import BicycleParams
 from twolevel.world.area import drivable_area
 from twolevel.world.assumptions import opposite_safe_distance, safe_distance
 from twolevel.world.signals import HorizonConstants
 from twolevel.world.world import World
 
-__all__ = ["oncoming_band", "pass_lane", "pass_time", "oncoming_free", "LANE_CHANGE_TIME"]
+__all__ = ["oncoming_band", "lateral_due", "lateral_share", "pass_lane", "pass_time", "oncoming_free",
+           "sight_suffices", "waiting_room", "out_of_lane", "OUT_OF_LANE_MARGIN", "LANE_CHANGE_TIME"]
 
 LANE_CHANGE_TIME = 2.0
 """[s] The time a lane change back into the route's lane takes (as :data:`BESIDE_FROM` allows for
@@ -82,6 +84,28 @@ def oncoming_band(world: World, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
             open_)
 
 
+def lateral_share(world: World, v0: float, due: float, t: float) -> float:
+    """The share [-] of a lane change begun now at speed ``v0`` [m/s] and due complete in ``due``
+    [s] that is done after ``t`` [s]: the smooth step (3u² − 2u³) of the way travelled at the
+    comfort acceleration (u = x(t)/x(due)) — from rest, little of it in the first second."""
+    a = world.settings.comfort.accel
+    u = min(1.0, (v0 * t + 0.5 * a * t * t) / max(v0 * due + 0.5 * a * due * due, 1e-9))
+    return 3.0 * u * u - 2.0 * u**3
+
+
+OUT_OF_LANE_MARGIN = 0.25
+"""[m] How far the ego's body keeps beyond the route lane's edge while it passes over the oncoming
+lane: the safety layer's box margin (0.1 m) and tracking. The safety layer predicts a vehicle
+on its lane anywhere across the lane (:mod:`twolevel.safety.occupancy`), so a pass that left part
+of the ego's body in that lane could never be verified."""
+
+
+def out_of_lane(world: World, s: float) -> float:
+    """[m] The least lateral offset of the ego's reference point (+ left) at route position ``s``
+    [m] at which its body is out of the route's lane by :data:`OUT_OF_LANE_MARGIN`."""
+    return 0.5 * float(world.route.width_at(s)) + 0.5 * world.ego.width + OUT_OF_LANE_MARGIN
+
+
 def pass_lane(world: World, s: float, beside: float, next_lane: float) -> float:
     """The lateral offset [m] the reference runs at while the ego passes a vehicle, beside it at
     ``beside`` [m]: the centre of the next lane
@@ -94,6 +118,20 @@ def pass_lane(world: World, s: float, beside: float, next_lane: float) -> float:
         lo, hi, _ = (float(b[0]) for b in oncoming_band(world, np.array([s])))
     lo, hi = min(lo, beside), max(hi, beside)
     return min(max(next_lane, lo), hi)
+
+
+def lateral_due(world: World, params: BicycleParams, v0: float, shift: float) -> float:
+    """[s] When a pass that starts now at speed ``v0`` [m/s] can be beside the vehicle ahead,
+    ``shift`` [m] to the side: at least :data:`BESIDE_FROM`, and the time to travel, at the comfort
+    acceleration from v0, the length of a smooth lane change (3u² − 2u³) of that width whose
+    curvature keeps within 80 % of the steering limit and, at v0, the comfort lateral
+    acceleration. From standstill a lane change needs room and time the 2 s of a pass at speed
+    do not give."""
+    shift = abs(shift)
+    length = max(_pull_out(params, shift), v0 * math.sqrt(6.0 * shift / world.settings.comfort.lat_accel))
+    a = world.settings.comfort.accel
+    t = (-v0 + math.sqrt(v0 * v0 + 2.0 * a * length)) / a
+    return max(BESIDE_FROM, t)
 
 
 def pass_time(world: World, front: Front, s0: float, v0: float) -> tuple[float, float, float]:
@@ -135,6 +173,40 @@ def oncoming_free(world: World, hc: HorizonConstants, front: Front, s0: float, v
         return False
     if np.any(~moving & (dist > -world.ego.length) & (dist < travel + st.D_safe)):
         return False
+    return sight_suffices(world, s0, T, travel, v_pass)
+
+
+def sight_suffices(world: World, s0: float, T: float, travel: float, v_pass: float) -> bool:
+    """Whether an oncoming vehicle just beyond the sensing range, at the assumptions' speed bound
+    for the limit at route position ``s0`` [m], leaves a pass of ``T`` [s] over ``travel`` [m]
+    ending at ``v_pass`` [m/s] RSS's opposite-direction distance."""
+    st = world.settings
     cap = world.assumptions.vehicle.speed_cap(float(world.route.limit_at(s0)))
-    unseen = travel + cap * T + float(opposite_safe_distance(v_pass, cap, ego_resp, other_resp))
+    unseen = travel + cap * T + float(opposite_safe_distance(v_pass, cap, st.response, world.assumptions.response))
     return unseen <= max(st.sensor_range, st.r_near)
+
+
+WAIT_ROOM_FACTOR = 1.5
+"""[-] The waiting room is this many lane changes at the steering limit long (room to track it)."""
+
+
+def waiting_room(world: World, params: BicycleParams, front: Front, s0: float, e0: float, lateral: float) -> float:
+    """[m] How much farther back than D_safe the ego waits behind ``front`` when it could pass it
+    over the oncoming lane but the oncoming traffic does not let it now: the length of a lane
+    change from rest to beside it (:func:`lateral_due`'s), so that it can pull out when the gap
+    comes; 0 where no pass over the oncoming lane could be taken (the lane is not open beside
+    it, or the sensing range could never show a gap long enough)."""
+    s_at = front.s[0] + np.array([-front.offset, 0.0, front.offset])
+    if not oncoming_band(world, s_at)[2].all():
+        return 0.0
+    T, travel, v_pass = pass_time(world, front, s0, 0.0)
+    if not (math.isfinite(T) and sight_suffices(world, s0, T, travel, v_pass)):
+        return 0.0
+    return WAIT_ROOM_FACTOR * _pull_out(params, max(front.e + lateral, out_of_lane(world, s0)) - e0)
+
+
+def _pull_out(params: BicycleParams, shift: float) -> float:
+    """[m] The length of a smooth lane change (3u² − 2u³) ``shift`` [m] wide whose curvature keeps
+    within 80 % of the steering limit (the yaw-rate law ψ̇ = v/l_f·tan δ)."""
+    kappa = math.tan(0.8 * params.delta_max) / params.l_f
+    return math.sqrt(6.0 * abs(shift) / kappa)

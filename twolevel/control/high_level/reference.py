@@ -19,7 +19,8 @@ import numpy as np
 
 from twolevel.control.high_level.guards import (BESIDE_FROM, LATERAL_MARGIN, Front, Pass, beside_steps,
                                                 drivable_band, free_sides, front_of, stop_lines)
-from twolevel.control.high_level.overtaking import oncoming_band, oncoming_free
+from twolevel.control.high_level.overtaking import (lateral_due, lateral_share, oncoming_band, oncoming_free, out_of_lane,
+                                                    waiting_room)
 from twolevel.control.high_level.settings import MPCSettings
 from twolevel.control.high_level.steering import steering_reference
 from twolevel.models.params import BicycleParams
@@ -44,7 +45,8 @@ class Reference:
     ``due`` [s] from now
     (:func:`twolevel.control.high_level.guards.free_sides`); ``oncoming``: the left pass goes over
     the oncoming lane, and the lateral band takes it in
-    (:mod:`twolevel.control.high_level.overtaking`)."""
+    (:mod:`twolevel.control.high_level.overtaking`), ``early``: the share of the way beside it due
+    at the last fine step (None: in proportion to the time)."""
 
     s0: float
     e0: float
@@ -60,6 +62,7 @@ class Reference:
     beside: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
     due: float = 0.0
     oncoming: bool = False
+    early: float | None = None
 
 
 def wrap_to(angle: np.ndarray | float, ref: float) -> np.ndarray:
@@ -164,7 +167,7 @@ def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, set
         s_near = float(min(lines[0], lines[-1]))
         if s0 + d_brake <= s_near + 1e-6:
             s_end = min(s_end, max(s_near - settings.stop_margin, s0))
-    follow, sides, lateral, lane, oncoming = None, (False, False), 0.0, 0.0, False
+    follow, sides, lateral, lane, oncoming, early = None, (False, False), 0.0, 0.0, False, None
     ticks = np.asarray(settings.ticks)
     times = dt * ticks
     front = front_of(world, hc, passing, s0, dt, ticks) if settings.rss else None
@@ -177,9 +180,16 @@ def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, set
         lo, hi = drivable_band(world, s_ref[beside])
         sides = free_sides(world, hc, front, lateral=lateral, band=(float(lo.max()), float(hi.min())),
                            s=s_ref[beside], v=v_ref[beside], t=times[beside])
-        if not sides[0]:
-            sides, oncoming = _over_oncoming(world, hc, front, sides, lateral=lateral, s0=s0, v0=float(x0[3]),
-                                             s=s_ref[beside], v=v_ref[beside], t=times[beside])
+        if not sides[0]:  # over the oncoming lane: a new pass from low speed needs longer to get beside
+            lateral_o = max(lateral, out_of_lane(world, s0) - front.e)  # wholly out of the vehicle's lane
+            due_o = due if passing is not None else max(due, lateral_due(world, params, float(x0[3]),
+                                                                          front.e + lateral_o - float(e_arr[0])))
+            beside_o = beside_steps(times, due_o)
+            sides_o, oncoming = _over_oncoming(world, hc, front, sides, lateral=lateral_o, s0=s0, v0=float(x0[3]),
+                                               s=s_ref[beside_o], v=v_ref[beside_o], t=times[beside_o])
+            if oncoming:
+                sides, due, beside, lateral = sides_o, due_o, beside_o, lateral_o
+                early = lateral_share(world, float(x0[3]), due, float(times[settings.H]))
         if passing is not None:  # the side the pass began on, the reference in that lane
             sides = (sides[0] and passing.side == 1, sides[1] and passing.side == 2)
             lane = passing.lane if any(sides) else 0.0
@@ -187,7 +197,8 @@ def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, set
             # approached as a stop line is (settings.stop_decel), more gently than RSS's braking
             gentle = replace(world.settings.response, brake_min=min(world.settings.response.brake_min,
                                                                     settings.stop_decel))
-            follow = Follow(front.s, front.v, front.offset + world.settings.D_safe, gentle)
+            room = waiting_room(world, params, front, s0, float(e_arr[0]), lateral)  # to pull out from
+            follow = Follow(front.s, front.v, front.offset + world.settings.D_safe + room, gentle)
     if math.isfinite(s_end) or follow is not None:
         s_ref, v_ref = _reference_to(route, s0, max(float(x0[3]), 0.0), steps, s_end, settings.stop_decel,
                                      comfort.accel, follow)
@@ -198,7 +209,7 @@ def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, set
     head = x0[2] + np.concatenate([[0.0], np.cumsum(wrap_to(np.diff(head), 0.0))])
     omega = np.column_stack([pts[1:], head[1:], v_ref[1:]])
     return Reference(s0, float(e_arr[0]), s_ref, v_ref, omega, hc, d_brake, v_brake, front, sides, lateral, beside,
-                     due, oncoming)
+                     due, oncoming, early)
 
 
 def _over_oncoming(world: World, hc: HorizonConstants, front: Front, sides: tuple[bool, bool], *, lateral: float,

@@ -1,0 +1,126 @@
+"""Passing over the oncoming lane (twolevel/control/high_level/overtaking.py) and the fail-safes
+that take the ego back into its lane (twolevel/safety/failsafe.py, verify.py): the band opens the
+oncoming lane only where the markings and zones allow it, the gap acceptance refuses an oncoming
+car closing, and in the closed loop the ego passes a stalled car when the oncoming lane is free
+and waits behind one where the centre line is solid."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from twolevel.control.high_level.guards import front_of
+from twolevel.control.high_level.overtaking import oncoming_band, oncoming_free, out_of_lane
+from twolevel.safety.failsafe import return_path
+from twolevel.sim.engine import simulate_scenario
+from twolevel.verdict.judge import judge_run
+from twolevel.world.assumptions import ResponseBounds, opposite_safe_distance
+from twolevel.world.signals import horizon_constants
+
+from helpers.world_files import load_world
+
+ROOT = Path(__file__).resolve().parents[3]
+EVERYDAY = ROOT / "scenarios" / "everyday"
+
+
+def test_opposite_safe_distance_is_rss_definition_4() -> None:
+    ego, other = ResponseBounds(0.5, 2.0, 4.0, 8.0), ResponseBounds(1.0, 3.0, 5.0, 8.0)
+    # ego at 10 m/s: (10 + 11)/2·0.5 + 11²/8; other at 8 m/s: (8 + 11)/2·1 + 11²/10
+    want = 5.25 + 121 / 8 + 9.5 + 121 / 10
+    assert opposite_safe_distance(10.0, 8.0, ego, other) == pytest.approx(want)
+    assert opposite_safe_distance(10.0, 8.0, ego, other) < opposite_safe_distance(10.0, 9.0, ego, other)
+
+
+def test_the_oncoming_lane_opens_only_where_markings_and_zones_allow() -> None:
+    dashed = load_world(EVERYDAY / "overtake_stalled.yaml")  # route s = east's s − 10
+    solid = load_world(EVERYDAY / "overtake_solid_line.yaml")  # route s = east's s − 250
+    zone = load_world(EVERYDAY / "overtake_tractor_zone.yaml")  # route s = east's s − 500
+    lo, hi, open_ = oncoming_band(dashed, np.array([50.0]))
+    assert open_[0] and hi[0] == pytest.approx(3.5 + 1.75 - dashed.ego.width / 2)  # to the oncoming lane's far edge
+    assert out_of_lane(dashed, 50.0) < hi[0]
+    for w, s in ((solid, 110.0), (zone, 60.0)):  # east 360 m (solid line), east 560 m (no-overtaking zone)
+        lo, hi, open_ = oncoming_band(w, np.array([s]))
+        assert not open_[0] and hi[0] == pytest.approx(1.75 - w.ego.width / 2)
+    assert oncoming_band(solid, np.array([20.0]))[2][0]  # east 270 m: dashed again
+
+
+def _gap_accepted(oncoming_at: float | None) -> bool:
+    """Whether the ego, 40 m behind the stalled car at 10 m/s, accepts the oncoming gap with an
+    oncoming car ``oncoming_at`` [m] along the road at 12 m/s (None: none)."""
+    w = load_world(EVERYDAY / "overtake_stalled.yaml")
+    tr = w.traffic0
+    if oncoming_at is not None:  # the stalled car's state, moved onto the oncoming lane at x = oncoming_at
+        tr = dataclasses.replace(
+            tr, x=np.append(tr.x, oncoming_at), y=np.append(tr.y, 1.75), psi=np.append(tr.psi, np.pi),
+            v=np.append(tr.v, 12.0), active=np.append(tr.active, True))
+        w = dataclasses.replace(w, parts=dataclasses.replace(
+            w.parts, length=np.append(w.parts.length, 4.5), width=np.append(w.parts.width, 1.8),
+            ids=tuple(w.parts.ids) + ("oncoming",)))
+    x0 = (40.0, -1.75, 0.0, 10.0)
+    hc = horizon_constants(w, tr, 0.0, x0)
+    front = front_of(w, hc, None, 30.0, 0.1, np.arange(len(hc.t)))
+    assert front is not None and front.index == 0
+    return oncoming_free(w, hc, front, 30.0, 10.0)
+
+
+def test_the_gap_is_accepted_when_free_and_refused_with_an_oncoming_car_closing() -> None:
+    assert _gap_accepted(None)
+    assert not _gap_accepted(200.0)  # 160 m away, closing at 22 m/s: too short for the pass
+    assert _gap_accepted(-50.0)  # already behind the ego, driving away
+
+
+@settings(max_examples=60, deadline=None)
+@given(e_from=st.floats(-3, 3), e_out=st.floats(-3, 3), e_goal=st.floats(-1, 1), d_out=st.floats(1, 30),
+       gap=st.floats(0, 20), d_ret=st.floats(1, 30))
+def test_return_path_is_smooth_from_start_to_goal(e_from: float, e_out: float, e_goal: float, d_out: float,
+                                                  gap: float, d_ret: float) -> None:
+    path = tuple(np.array([x]) for x in (e_out, 0.0, d_out, e_goal, d_out + gap, d_ret))
+    s = np.linspace(-5.0, d_out + gap + d_ret + 5.0, 400)
+    e, slope, _ = return_path(np.array([e_from]), path, s)
+    assert e[0] == pytest.approx(e_from) and e[-1] == pytest.approx(e_goal)
+    assert slope[0] == 0.0 and slope[-1] == 0.0
+    beside = (s >= d_out) & (s <= d_out + gap)
+    assert np.allclose(e[beside], e_out)
+    lo, hi = min(e_from, e_out, e_goal), max(e_from, e_out, e_goal)
+    assert ((e >= lo - 1e-9) & (e <= hi + 1e-9)).all()  # no overshoot
+
+
+def _simulate(tmp_path: Path, name: str) -> tuple[np.ndarray, np.ndarray]:
+    path = EVERYDAY / f"{name}.yaml"
+    summary, diags = simulate_scenario(str(path), str(tmp_path / name), frames=False, ttr_every=0)
+    assert summary is not None and summary.status == "complete", [d.message for d in diags]
+    verdict, _ = judge_run(summary.run_dir, str(path))
+    assert verdict.passed, [c.detail for c in verdict.failed]  # goal (as expected), road, collisions, rules
+    data = np.genfromtxt(Path(summary.run_dir) / "trace.csv", delimiter=",", names=True, usecols=("x", "y", "v"))
+    return np.column_stack([data["x"], data["y"]]), data["v"]
+
+
+@pytest.mark.slow
+def test_a_stalled_car_is_passed_over_the_free_oncoming_lane(tmp_path: Path) -> None:
+    xy, v = _simulate(tmp_path, "overtake_stalled")
+    w = load_world(EVERYDAY / "overtake_stalled.yaml")
+    out = xy[:, 1] - w.ego.width / 2 > 0.0  # wholly over the centre line (y = 0)
+    assert out.any()
+    assert xy[out, 0].min() < 80.0 - 2.1 and xy[out, 0].max() > 80.0 + 2.1  # beside the stalled car, out of its lane
+    assert abs(xy[-1, 1] + 1.75) < 0.2  # back in its lane
+    assert v[xy[:, 0] < 100.0].min() > 3.0  # without stopping (it stops at its goal)
+
+
+@pytest.mark.slow
+def test_the_ego_waits_behind_a_stalled_car_across_a_solid_line(tmp_path: Path) -> None:
+    xy, v = _simulate(tmp_path, "overtake_solid_line")
+    w = load_world(EVERYDAY / "overtake_solid_line.yaml")
+    assert (xy[:, 1] + w.ego.width / 2 < 0.05).all()  # never over the centre line
+    assert v[-1] < 0.1 and xy[-1, 0] < 360.0 - 4.0  # standing behind it
+
+
+@pytest.mark.slow
+def test_the_ego_follows_a_tractor_through_a_no_overtaking_zone(tmp_path: Path) -> None:
+    xy, v = _simulate(tmp_path, "overtake_tractor_zone")  # the goal (in the zone) is reached: judged
+    w = load_world(EVERYDAY / "overtake_tractor_zone.yaml")
+    assert (xy[:, 1] + w.ego.width / 2 < 0.05).all()  # never over the centre line
