@@ -19,6 +19,12 @@ so what is executed is what was verified; after its last command the car holds t
   car is in one: keep the speed (or gain some, from standstill too) until the car's centre is
   past the zone's end by ``clear_margin``, then brake. A car already inside a junction leaves it.
 
+* **returning** ones when the car is out of the route's lane (passing over the oncoming lane, or
+  its box over the line): brake while steering back into the lane (behind what it passes), creep
+  back, or complete the pass — out beside what it passes, past it, back into the lane, then
+  brake (:func:`manoeuvres`' ``back``; the lateral path is :func:`return_path`, tracked in
+  half-second closed-loop segments).
+
 **Steering** follows the route: the curvature along the manoeuvre's speed profile as feed-
 forward (δ = atan(wheelbase · κ)), plus a correction of the heading and lateral errors at the
 start (Stanley's law, faded out over a second), bounded by a lateral acceleration ``a_lat_max``
@@ -158,19 +164,26 @@ def manoeuvres(settings: FailSafeSettings, zones: np.ndarray, s0: float, v0: flo
 
 def _returning(settings: FailSafeSettings, s0: float, v0: float, brake_full: float, e_goal: float,
                s_past: float, e_beside: float) -> list[Manoeuvre]:
-    """:func:`manoeuvres` for a car out of the route's lane (its ``back``)."""
+    """:func:`manoeuvres` for a car out of the route's lane (its ``back``): the gentlest and the
+    full braking level, the creep, and completing the pass at the speed it has or gaining 1.5
+    m/s², braking gently after — completing first when the car is already out beside what it
+    passes (the likeliest to pass verification, tried alone first; few manoeuvres, since each is
+    rolled out in half-second closed-loop segments)."""
+    levels = sorted({min(settings.decels), max(settings.decels)}) if settings.decels else [brake_full]
     out = [Manoeuvre(d, e_goal=e_goal, s_return=s0,
-                     d_return=max(v0**2 / (2 * min(brake_full, d)), 0.5)) for d in settings.decels]
+                     d_return=max(v0**2 / (2 * min(brake_full, d)), 0.5)) for d in levels]
     # slow or standing: creep back, over the distance the steering limit needs for the step
     d_min = math.sqrt(6.0 * 3.5 * 2.7 / math.tan(0.8 * settings.delta_max))  # a lane's width, wheelbase ~2.7 m
-    out.append(Manoeuvre(min(settings.decels), 1.0, s0 + d_min, e_goal, s0, d_min))
+    out.append(Manoeuvre(levels[0], 1.0, s0 + d_min, e_goal, s0, d_min))
     if math.isfinite(s_past):
         v = max(v0, 3.0)
         d_ret = v * math.sqrt(6.0 * 3.5 / (0.5 * settings.a_lat_max))  # a lane's width back
         start = max(s_past, s0)
         d_out = min(d_ret, max(0.6 * (start - s0), 0.5))  # out beside it before its rear
-        out += [Manoeuvre(b, a, start + d_ret, e_goal, start, d_ret, e_beside, s0, d_out)
-                for b in settings.clear_brakes for a in settings.clear_accels]
+        brake = min(settings.clear_brakes) if settings.clear_brakes else levels[0]
+        complete = [Manoeuvre(brake, a, start + d_ret, e_goal, start, d_ret, e_beside, s0, d_out)
+                    for a in sorted({0.0, max(settings.clear_accels, default=0.0)})]
+        out = complete + out if abs(e_beside - e_goal) > 0 and v0 > 1.0 else out + complete
     return out
 
 
@@ -262,7 +275,7 @@ def roll(x0: np.ndarray, plan: list[Manoeuvre], route: Route, s0: float, dt: flo
         need = t_c + v_c / decel + 2 * dt
         n = int(min(n_max - done, bucket * math.ceil(float(need[stop_at < 0].max()) / (bucket * dt) + 1e-9)))
         n = max(n, 1)
-        if returning.any():  # steered along a path: closed loop twice a second
+        if (returning & (stop_at < 0) & (s < path[4] + path[5])).any():  # on a path: closed loop twice a second
             n = min(n, max(1, bucket // 2))
         tk = dt * np.arange(n)[None, :]
         in_clear = clearing[:, None] & (tk < t_c[:, None])

@@ -283,7 +283,7 @@ def _back(ctx: Context, traffic: TrafficState, s_ego: float, e_ego: float, psi: 
         if beside.any():
             s_past = float(np.max(s_i[beside] + length[beside] / 2)) + w.ego.length / 2 + w.settings.D_safe
             reach = e_i[beside] + side * (0.5 * (w.parts.width[idx][beside] + ctx.params.width) + PASS_CLEARANCE)
-            out = half + 0.5 * ctx.params.width + m + 0.05  # wholly out of the lane (its occupancy spans it)
+            out = half + 0.5 * ctx.params.width + m + 0.25  # wholly out of the lane (its occupancy spans it)
             e_beside = float(side * max(float(np.max(side * reach)), out))
             passed[idx[beside]] = True
     return min(max(0.0, lo), hi), s_past, e_beside, passed

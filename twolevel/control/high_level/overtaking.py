@@ -93,11 +93,12 @@ def lateral_share(world: World, v0: float, due: float, t: float) -> float:
     return 3.0 * u * u - 2.0 * u**3
 
 
-OUT_OF_LANE_MARGIN = 0.25
+OUT_OF_LANE_MARGIN = 0.35
 """[m] How far the ego's body keeps beyond the route lane's edge while it passes over the oncoming
-lane: the safety layer's box margin (0.1 m) and tracking. The safety layer predicts a vehicle
-on its lane anywhere across the lane (:mod:`twolevel.safety.occupancy`), so a pass that left part
-of the ego's body in that lane could never be verified."""
+lane: the safety layer's box margin (0.1 m), tracking, and D_safe (1 m) to what it passes. The
+safety layer predicts a vehicle on its lane anywhere across the lane
+(:mod:`twolevel.safety.occupancy`), so a pass that left part of the ego's body in that lane could
+never be verified."""
 
 
 def out_of_lane(world: World, s: float) -> float:
