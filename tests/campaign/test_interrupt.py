@@ -73,6 +73,17 @@ def _completed(runs: Path) -> bool:
     return False
 
 
+def _running(runs: Path) -> bool:
+    """Some run below ``runs`` is under way (its run.json says so)."""
+    for meta in runs.glob("*/run.json"):
+        try:
+            if json.loads(meta.read_text())["status"] == "running":
+                return True
+        except (OSError, ValueError, KeyError):  # being replaced: atomically, but read it again
+            pass
+    return False
+
+
 def _interrupted_runs(runs: Path) -> list[str]:
     out = []
     for meta in runs.glob("*/run.json"):
@@ -91,7 +102,9 @@ def _said(signame: str) -> str:
 def test_an_interrupted_suite_writes_what_completed_and_stops_its_workers(tmp_path: Path, signame: str) -> None:
     proc = _start(["test", str(SUITE), "-j", "2", "--runs-dir", "runs", "--keep-passed", "--junit-xml", "junit.xml",
                    "--json", "results.json", "--cache-file", "cache.json"], tmp_path)
-    out, err = _interrupt(proc, signame, line=" s)")  # the first case's line: "PASSED  <case> (6.8 s)"
+    # after the first case's line ("PASSED  <case> (6.8 s)"), once a case is under way (a run that
+    # has not written its run.json yet is cancelled, not interrupted: nothing would record it)
+    out, err = _interrupt(proc, signame, ready=lambda: _running(tmp_path / "runs"), line=" s)")
     assert proc.returncode == 128 + getattr(signal, signame), (out, err)
     assert "Traceback" not in err and err.strip().splitlines() == [err.strip()], err
     assert err.startswith(f"twolevel: {_said(signame)}: ") and " of 8 cases completed" in err
