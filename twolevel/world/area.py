@@ -29,7 +29,8 @@ import numpy as np
 
 from twolevel.world.geometry import LaneSet, Route, step_index
 
-__all__ = ["Area", "drivable_area", "route_lanes_at"]
+__all__ = ["Area", "CentreLine", "drivable_area", "route_lanes_at", "centre_line", "over_centre",
+           "overtaking_signals"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -96,3 +97,63 @@ def drivable_area(lanes: LaneSet, route: Route, s: np.ndarray, *, oncoming: bool
         out[f"crossed_{name}"] = crossed
     return Area(s, lane, s_lane, -half, half, out["same_lo"], out["same_hi"], out["lo"], out["hi"],
                 out["crossed_lo"] | out["crossed_hi"])
+
+
+@dataclass(frozen=True, eq=False)
+class CentreLine:
+    """The boundary between the lanes running the route's way and the first lane running against
+    it, left of the route, at route positions ``s`` (N,) [m]: its ``offset`` (N,) [m] from the route
+    lane's centre line (+ left; +inf where no oncoming lane lies to the left), whether it is
+    ``solid`` (N,) there (its marking may not be crossed from the ego's side:
+    :data:`~twolevel.world.geometry.CROSSABLE`; false without an oncoming lane) and whether the
+    route lane is in a ``no_overtaking`` zone (N,) there."""
+
+    offset: np.ndarray
+    solid: np.ndarray
+    no_overtaking: np.ndarray
+
+
+def centre_line(lanes: LaneSet, route: Route, s: np.ndarray, *, max_lanes: int = 4) -> CentreLine:
+    """The centre line left of the route at route positions ``s`` (N,) [m] (:class:`CentreLine`):
+    walks left from the route lane across lanes beside it that run the same way (whatever their
+    markings), adding up their widths, to the first one running against it."""
+    s = np.asarray(s, dtype=float).reshape(-1)
+    lane, s_lane = route_lanes_at(route, s)
+    cur, cur_s = lane.copy(), s_lane.copy()
+    offset = 0.5 * lanes.width_at(lane, s_lane)
+    found_at = np.full(len(s), np.inf)
+    solid = np.zeros(len(s), dtype=bool)
+    alive = np.ones(len(s), dtype=bool)
+    for _ in range(max_lanes):
+        if not alive.any():
+            break
+        nb, nb_s = lanes.beside(cur, cur_s, True)
+        here = alive & (nb >= 0)
+        against = here & ~lanes.adj_left_same[cur]
+        found_at = np.where(against, offset, found_at)
+        solid = np.where(against, ~lanes.markings.crossable(cur, cur_s, True), solid)
+        alive = here & ~against
+        nbi = np.maximum(nb, 0)
+        offset = np.where(alive, offset + lanes.width_at(nbi, np.where(alive, nb_s, 0.0)), offset)
+        cur, cur_s = np.where(alive, nbi, cur), np.where(alive, nb_s, cur_s)
+    return CentreLine(found_at, solid, lanes.no_overtaking.contains(lane, s_lane))
+
+
+def over_centre(line: CentreLine, e: np.ndarray, width: float) -> np.ndarray:
+    """The ``over_centre`` signal [m]: how far a body of ``width`` [m] at lateral offset ``e`` [m]
+    (+ left of the route) reaches over the centre line ``line`` (< 0 while inside; −inf where no
+    oncoming lane lies to the left). The body's half-width is taken across the route (its heading
+    relative to the route is left out: affine in e, as the MPC encodes it)."""
+    return np.asarray(e, dtype=float) + 0.5 * width - line.offset
+
+
+def overtaking_signals(lanes: LaneSet, route: Route, s: np.ndarray, e: np.ndarray, width: float
+                       ) -> dict[str, np.ndarray]:
+    """The signals ``over_centre`` [m], ``solid_left`` and ``no_overtaking`` (1/0) of an ego of
+    ``width`` [m] at route coordinates ``s``, ``e`` [m] (any shape, broadcast; the shape kept):
+    :mod:`twolevel.world.provided`."""
+    s, e = np.broadcast_arrays(np.asarray(s, dtype=float), np.asarray(e, dtype=float))
+    line = centre_line(lanes, route, np.clip(s, 0.0, route.length).ravel())
+    return {"over_centre": over_centre(line, e.ravel(), width).reshape(s.shape),
+            "solid_left": line.solid.astype(float).reshape(s.shape),
+            "no_overtaking": line.no_overtaking.astype(float).reshape(s.shape)}

@@ -26,6 +26,12 @@ d_zone_out    m      route distance the ego's rear still has to the exit of that
                      has left; −inf if none): inside while d_zone ≤ 0 < d_zone_out
 t_zone        s      time to reach that area at the current speed (0 inside, +inf standing or none)
 t_zone_out    s      time to clear it at the current speed (+inf standing in or before it, 0 if none)
+over_centre   m      how far the ego's body reaches over the centre line (the boundary to the first
+                     lane left of the route running against it) into the oncoming lane: e + W/2
+                     − the line's offset (< 0 inside; −inf where no oncoming lane lies to the left)
+solid_left    1/0    1 when that centre line is solid at the ego's route position (may not be crossed
+                     from the ego's side)
+no_overtaking 1/0    1 inside a no-overtaking zone of the route's lane
 ============  =====  ===============================================================
 
 **Participant signals** relate one other participant o to the ego; a rule reads them inside a
@@ -87,7 +93,7 @@ from typing import Mapping
 
 SIGNALS: tuple[str, ...] = ("x", "y", "psi", "v", "a", "delta", "s", "e", "v_max", "d_stop", "light_red",
                             "d_light", "d_lead", "v_lead", "min_gap", "n_near", "rss_gap", "d_zone", "d_zone_out",
-                            "t_zone", "t_zone_out")
+                            "t_zone", "t_zone_out", "over_centre", "solid_left", "no_overtaking")
 """Every signal the world provides, in the order of the table above (the one list of their names:
 the simulator's history and trace columns follow this order)."""
 

@@ -25,6 +25,7 @@ import numpy as np
 
 from twolevel.models.obb import pose_separation
 from twolevel.stl.analysis import PRESENT, participant_key
+from twolevel.world.area import overtaking_signals
 from twolevel.world.relations import acceleration, relations
 from twolevel.world.right_of_way import ZONE_PARTICIPANT_SIGNALS, participant_zone_signals, zone_signals
 from twolevel.world.signals import (PASS_MARGIN, STOP_ZONE, StopMemory, ahead_in_lane, rss_gap, sensing_window,
@@ -197,6 +198,7 @@ def sense(world: World, t0: float, dt: float, memory: Memory, others: Others, x:
     out["light_red"], out["d_light"] = _light(world, memory, t0 + dt * np.arange(T), s, v)
     out.update(_lead_and_gap(world, others, x, y, psi, s, e, v))
     out.update(zone_signals(world, s, v))
+    out.update(overtaking_signals(world.lanes, route, s, e, world.ego.width))
     if world.participant_signals and others.n:
         out.update(_participants(world, others, x, y, psi, s, e, dt, t0))
     return out

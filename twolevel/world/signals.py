@@ -37,6 +37,8 @@ Definitions (sensing is limited to ``r_near``):
   (:func:`twolevel.world.assumptions.safe_distance` with ``settings.response``:
   :class:`~twolevel.world.loader.Sensing`) — ≥ 0 when the ego can stop behind it whatever it does
   within the assumptions. +inf if none.
+* ``over_centre``, ``solid_left``, ``no_overtaking``: the centre line left of the route (the
+  boundary to the first lane running against it) at s, :func:`twolevel.world.area.overtaking_signals`.
 * Participant signals (``d_lon[ID]``, ``present[ID]``, …; :mod:`twolevel.world.provided`):
   :func:`participant_signals_along`, with each participant projected as for ``d_lead``.
 """
@@ -50,6 +52,7 @@ import numpy as np
 
 from twolevel.models.obb import box_corners, box_separation
 from twolevel.stl.analysis import PRESENT, participant_key
+from twolevel.world.area import centre_line, overtaking_signals
 from twolevel.world.assumptions import ResponseBounds, safe_distance
 from twolevel.world.geometry import Route
 from twolevel.world.provided import PARTICIPANT_SIGNALS, PROVIDED_SIGNALS
@@ -241,6 +244,7 @@ def signals_along(
     out["light_red"], out["d_light"] = _light(world, t, s, v)
     out.update(_others(world, traffic, x, y, psi, s, e, v))
     out.update(zone_signals(world, s, v))
+    out.update(overtaking_signals(world.lanes, route, s, e, world.ego.width))
     assert set(out) == PROVIDED_SIGNALS
     return out
 
@@ -323,6 +327,9 @@ class HorizonConstants:
     seen_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
     seen_e: np.ndarray = field(default_factory=lambda: np.zeros(0))
     seen_v: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    over_offset: np.ndarray = field(default_factory=lambda: np.full(1, -np.inf))
+    solid_left: np.ndarray = field(default_factory=lambda: np.zeros(1))
+    no_overtaking: np.ndarray = field(default_factory=lambda: np.zeros(1))
 
 
 def horizon_constants(
@@ -394,7 +401,10 @@ def horizon_constants(
             if dist[ahead] <= r_near:
                 lead = int(np.searchsorted(near, ahead))
                 s_lead, lead_offset = s_ahead, ahead_offset
+    line = centre_line(world.lanes, route, np.clip(s_pred, 0.0, route.length))
     return HorizonConstants(t, np.asarray(s_pred, dtype=float), v_max, s_stop, s_light, light_red, near, xy,
                             np.repeat(traffic.psi[near, None], H + 1, axis=1), world.parts.length[near],
                             world.parts.width[near], traffic.v[near], lead, s_lead, lead_offset, ahead, s_ahead,
-                            v_ahead, ahead_offset, e_ahead, seen, si, ei, traffic.v[seen] * along)
+                            v_ahead, ahead_offset, e_ahead, seen, si, ei, traffic.v[seen] * along,
+                            0.5 * world.ego.width - line.offset, line.solid.astype(float),
+                            line.no_overtaking.astype(float))

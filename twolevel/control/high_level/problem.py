@@ -61,6 +61,10 @@ from twolevel.models.params import BicycleParams
 __all__ = ["StepRules", "Layout", "Assembled", "assemble", "trace_signals", "shape_key", "dynamics_values",
            "guard_values", "rss_bounds", "others_of", "set_cost", "input_bounds"]
 
+FAR_INSIDE = 1e3
+"""[m] ``over_centre`` where no oncoming lane lies left of the route at some steps of a horizon
+that has one at others (the monitor's −inf there): far inside, finite for the encoding."""
+
 
 @dataclass(frozen=True, eq=False)
 class StepRules:
@@ -199,6 +203,16 @@ def trace_signals(step: StepData, lay: Layout, n: int, past: Mapping[str, np.nda
                 out[name] = _affine(lay.x[:, 3:4], one, np.zeros(H), hist(name, float(x0[3])), n)
             else:
                 out[name] = np.concatenate([hist(name, v_lead)[:-1], np.full(H + 1, v_lead)])
+        elif name == "over_centre":  # e_k + W/2 − the centre line's offset at s̄_k (twolevel.world.area)
+            c = hc.over_offset[f]
+            if not np.any(np.isfinite(c)):  # no oncoming lane to the left anywhere along the horizon
+                out[name] = np.concatenate([hist(name, -np.inf)[:-1], np.full(H + 1, -np.inf)])
+            else:  # where one begins or ends within the horizon: far inside, finite for the encoding
+                c = np.maximum(c, -FAR_INSIDE)
+                out[name] = _affine(xy, n_hat, e_off + c[1:], hist(name, e_now + float(c[0])), n)
+        elif name in ("solid_left", "no_overtaking"):
+            c = getattr(hc, name)[f]
+            out[name] = np.concatenate([hist(name, float(c[0]))[:-1], c])
         elif name == "n_near":
             out[name] = np.concatenate([hist(name, float(len(hc.index)))[:-1], np.full(H + 1, float(len(hc.index)))])
     out.update(zone_signals_over(step.zones, names, H, P,
