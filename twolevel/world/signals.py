@@ -62,8 +62,8 @@ from twolevel.world.traffic import RED, YELLOW, TrafficState
 from twolevel.world.world import World
 
 __all__ = ["PASS_MARGIN", "STOP_ZONE", "LEAD_HEADING", "TrafficLog", "StopMemory", "HorizonConstants", "signals_along",
-           "participant_signals_along", "horizon_constants", "update_stop_memory", "same_way", "ahead_in_lane", "rss_gap",
-           "sensing_window"]
+           "participant_signals_along", "horizon_constants", "route_lookups", "update_stop_memory", "same_way",
+           "ahead_in_lane", "rss_gap", "sensing_window"]
 
 PASS_MARGIN = 5.0  # [m] how far past a stop line it still counts (so running it is visible)
 STOP_ZONE = 3.0  # [m] a stop counts for a stop sign when made at most this far before its line
@@ -360,7 +360,6 @@ def horizon_constants(
     t = t0 + tau
     if s_pred is None:
         s_pred, _ = route.reference(s0, v, H, dt)
-    v_max = route.limit_at(s_pred).astype(float)
     # stop line
     mem = memory or StopMemory.fresh(world)
     d = world.route_stops - s0
@@ -401,10 +400,19 @@ def horizon_constants(
             if dist[ahead] <= r_near:
                 lead = int(np.searchsorted(near, ahead))
                 s_lead, lead_offset = s_ahead, ahead_offset
-    line = centre_line(world.lanes, route, np.clip(s_pred, 0.0, route.length))
-    return HorizonConstants(t, np.asarray(s_pred, dtype=float), v_max, s_stop, s_light, light_red, near, xy,
+    at = route_lookups(world, np.asarray(s_pred, dtype=float))
+    return HorizonConstants(t, np.asarray(s_pred, dtype=float), at["v_max"], s_stop, s_light, light_red, near, xy,
                             np.repeat(traffic.psi[near, None], H + 1, axis=1), world.parts.length[near],
                             world.parts.width[near], traffic.v[near], lead, s_lead, lead_offset, ahead, s_ahead,
                             v_ahead, ahead_offset, e_ahead, seen, si, ei, traffic.v[seen] * along,
-                            0.5 * world.ego.width - line.offset, line.solid.astype(float),
-                            line.no_overtaking.astype(float))
+                            at["over_offset"], at["solid_left"], at["no_overtaking"])
+
+
+def route_lookups(world: World, s_ref: np.ndarray) -> dict[str, np.ndarray]:
+    """What :class:`HorizonConstants` looks up at the predicted route positions ``s_ref``
+    (H+1,) [m]: ``v_max`` [m/s], ``over_offset`` [m], ``solid_left`` and ``no_overtaking`` (1/0)
+    — replace them all together when the reference's positions change."""
+    route = world.route
+    line = centre_line(world.lanes, route, np.clip(s_ref, 0.0, route.length))
+    return {"v_max": route.limit_at(s_ref).astype(float), "over_offset": 0.5 * world.ego.width - line.offset,
+            "solid_left": line.solid.astype(float), "no_overtaking": line.no_overtaking.astype(float)}

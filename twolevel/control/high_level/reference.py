@@ -26,7 +26,7 @@ from twolevel.control.high_level.steering import steering_reference
 from twolevel.models.params import BicycleParams
 from twolevel.world.assumptions import ResponseBounds, safe_speed
 from twolevel.world.geometry import Route
-from twolevel.world.signals import HorizonConstants, StopMemory, horizon_constants
+from twolevel.world.signals import HorizonConstants, StopMemory, horizon_constants, route_lookups
 from twolevel.world.traffic import TrafficState
 from twolevel.world.world import World
 
@@ -202,7 +202,7 @@ def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, set
     if math.isfinite(s_end) or follow is not None:
         s_ref, v_ref = _reference_to(route, s0, max(float(x0[3]), 0.0), steps, s_end, settings.stop_decel,
                                      comfort.accel, follow)
-        hc = replace(hc, s_ref=s_ref, v_max=route.limit_at(s_ref).astype(float))
+        hc = replace(hc, s_ref=s_ref, **route_lookups(world, s_ref))
     v_ref = np.minimum(v_ref, route.limit_at(s_ref))
     pts = route.position(s_ref, lane)
     head = wrap_to(route.heading_at(s_ref), float(x0[2]))
