@@ -62,22 +62,11 @@ def _interrupt(proc: subprocess.Popen, signame: str, ready: Callable[[], bool] |
     return "".join(seen) + out, err
 
 
-def _completed(runs: Path) -> bool:
-    """Some run below ``runs`` is complete."""
+def _some_run(runs: Path, status: str) -> bool:
+    """Some run below ``runs`` has ``status`` in its run.json ("running": under way)."""
     for meta in runs.glob("*/run.json"):
         try:
-            if json.loads(meta.read_text())["status"] == "complete":
-                return True
-        except (OSError, ValueError, KeyError):  # being replaced: atomically, but read it again
-            pass
-    return False
-
-
-def _running(runs: Path) -> bool:
-    """Some run below ``runs`` is under way (its run.json says so)."""
-    for meta in runs.glob("*/run.json"):
-        try:
-            if json.loads(meta.read_text())["status"] == "running":
+            if json.loads(meta.read_text())["status"] == status:
                 return True
         except (OSError, ValueError, KeyError):  # being replaced: atomically, but read it again
             pass
@@ -104,7 +93,7 @@ def test_an_interrupted_suite_writes_what_completed_and_stops_its_workers(tmp_pa
                    "--json", "results.json", "--cache-file", "cache.json"], tmp_path)
     # after the first case's line ("PASSED  <case> (6.8 s)"), once a case is under way (a run that
     # has not written its run.json yet is cancelled, not interrupted: nothing would record it)
-    out, err = _interrupt(proc, signame, ready=lambda: _running(tmp_path / "runs"), line=" s)")
+    out, err = _interrupt(proc, signame, ready=lambda: _some_run(tmp_path / "runs", "running"), line=" s)")
     assert proc.returncode == 128 + getattr(signal, signame), (out, err)
     assert "Traceback" not in err and err.strip().splitlines() == [err.strip()], err
     assert err.startswith(f"twolevel: {_said(signame)}: ") and " of 8 cases completed" in err
@@ -124,7 +113,7 @@ def test_an_interrupted_sweep_tabulates_the_runs_that_completed(tmp_path: Path) 
     proc = _start(["sweep", str(SUITE / "goal_at.yaml"), "--samples", "8", "-j", "2", "--out", "sweep",
                    "--keep-passed"], tmp_path)
     runs = tmp_path / "sweep" / "runs"
-    out, err = _interrupt(proc, "SIGTERM", ready=lambda: _completed(runs))
+    out, err = _interrupt(proc, "SIGTERM", ready=lambda: _some_run(runs, "complete"))
     assert proc.returncode == 143 and "Traceback" not in err and "runs completed" in err, (out, err)
     with (tmp_path / "sweep" / "results.csv").open(newline="") as fh:
         rows = list(csv.DictReader(fh))
