@@ -157,7 +157,13 @@ def _simulate(x0: ArrayLike, controls: ArrayLike, dt: float, p: VehicleParams, b
     elif backend in ("auto", "casadi", "casadi-vm"):
         jit = backend != "casadi-vm" and compiled_available()
         f = _batch_function(p, float(dt), H, K, accel, jit)
-        out = np.asarray(f(x.T, u.reshape(K * H, 2).T))  # (12, K·H)
+        res = f(x.T, u.reshape(K * H, 2).T)
+        if not hasattr(res, "full"):  # symbolic: casadi's overload dispatch swallowed a signal raised in
+            from twolevel import interruption  # the numeric call and tried the symbolic overloads
+
+            interruption.checkpoint()  # the signal, as the interruption it is
+            raise RuntimeError("the compiled rollout returned a symbolic result")
+        out = np.asarray(res.full())  # (12, K·H)
         states = np.concatenate([x[:, None, :], out.reshape(fw.NX, K, H).transpose(1, 2, 0)], axis=1)
     else:
         raise ValueError(f"unknown backend {backend!r}")
