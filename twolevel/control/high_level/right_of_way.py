@@ -35,6 +35,7 @@ from typing import Callable, Mapping
 
 import numpy as np
 
+from twolevel.safety.occupancy import time_to_travel
 from twolevel.stl.analysis import PRESENT, participant_key, split_participant_key
 from twolevel.world.provided import PARTICIPANT_ABSENT
 from twolevel.world.right_of_way import (REACH_DISTANCE, ZONE_PARTICIPANT_SIGNALS, next_area,
@@ -43,7 +44,7 @@ from twolevel.world.signals import HorizonConstants
 from twolevel.world.world import World
 
 __all__ = ["RUN_UP", "GAP_MARGIN", "GAP_SPEED", "BLOCK_SPEED", "BLOCK_GAP", "ZoneConstants", "zone_constants",
-           "give_way_line", "worst_reach", "zone_signals_over", "MPC_ZONE_PATTERNS"]
+           "give_way_line", "zone_signals_over", "MPC_ZONE_PATTERNS"]
 
 RUN_UP = 1.0
 """[m] How far before a conflict area the ego waits for a gap (its front); from there it moves off
@@ -70,7 +71,8 @@ class ZoneConstants:
     (n,) within r_near and their ``values`` (n, H+1) over the fine part: ``t_reach``/``t_clear``
     [s], ``priority``, ``d_exit`` [m] (with the ego held at s0; the MPC makes it c − s_k);
     ``worst_reach`` (n,) [s]: when each could reach the area at the earliest under the world's
-    assumptions (:func:`worst_reach`); ``blocked``: the exit is."""
+    assumptions (:func:`twolevel.safety.occupancy.time_to_travel`, the verifier's); ``blocked``:
+    the exit is."""
 
     s_in: float = math.inf
     s_out: float = -math.inf
@@ -114,27 +116,14 @@ def zone_constants(world: World, hc: HorizonConstants, s0: float, H: int) -> Zon
         b = world.parts.bounds[hc.index]
         top = float(world.limits.value.max(initial=float(world.route.limit_v.max())))  # any lane's limit
         v_cap = np.minimum(b[:, 0], b[:, 1] * top)
-        worst = worst_reach(vals[REACH_DISTANCE][0], hc.v, b[:, 2], v_cap)
+        # the verifier's reach (no power limit): accelerating at a_max up to the cap, from v now
+        worst = time_to_travel(hc.v, np.maximum(v_cap, hc.v), b[:, 2], np.full(n, np.inf), vals[REACH_DISTANCE][0])
     # the exit is blocked when the vehicle ahead in the ego's lane (slower than a crossing, v_ahead
     # held) would leave no room for the ego behind the area's exit
     room = float(hc.s_ahead[min(H, len(hc.s_ahead) - 1)]) - hc.ahead_offset - BLOCK_GAP
     blocked = hc.ahead >= 0 and hc.v_ahead < BLOCK_SPEED and room < float(z.area_s1[k]) + L / 2
     return ZoneConstants(float(z.area_s0[k]), float(z.area_s1[k]), s0, L, ids,
                          {name: np.asarray(v).T for name, v in vals.items()}, bool(blocked), worst)
-
-
-def worst_reach(d: np.ndarray, v: np.ndarray, a_max: np.ndarray, v_cap: np.ndarray) -> np.ndarray:
-    """[s] The earliest a body at speed ``v`` [m/s] covers ``d`` [m] accelerating at ``a_max``
-    [m/s²] up to ``v_cap`` [m/s] (the safety layer's assumptions about others: what its
-    verifier checks an entry against). +inf for d = +inf."""
-    d, v = np.asarray(d, float), np.asarray(v, float)
-    v_top = np.maximum(v_cap, v)
-    t1 = (v_top - v) / a_max
-    d1 = 0.5 * (v + v_top) * t1
-    with np.errstate(invalid="ignore", divide="ignore"):
-        accel = (np.sqrt(v * v + 2 * a_max * np.minimum(d, d1)) - v) / a_max
-        out = np.where(d <= d1, accel, t1 + (d - d1) / v_top)
-    return np.where(np.isfinite(d), out, np.inf)
 
 
 def give_way_line(zc: ZoneConstants | None) -> float:
