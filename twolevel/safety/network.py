@@ -314,18 +314,25 @@ def _level(net_root: np.ndarray, world: World, ref: int, member: int) -> np.ndar
     return np.interp(net_root[ls.vptr[member]:ls.vptr[member + 1]], table, ls.lanes[ref].s)
 
 
-def _ref_tables(world: World, group: np.ndarray, dlat: np.ndarray, exact: np.ndarray, root_s: np.ndarray,
-                change: bool, limits: np.ndarray, lines: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+def _members(group: np.ndarray, dlat: np.ndarray, change: bool) -> list[list[int]]:
+    """The members of each lane as a node's ref, ordered by lateral offset ``dlat`` [m]: with lane
+    changes its ``group``, else the lane alone."""
+    if not change:
+        return [[r] for r in range(len(group))]
+    members_of = {g: sorted(np.flatnonzero(group == g).tolist(), key=lambda i: dlat[i]) for g in set(group.tolist())}
+    return [members_of[group[r]] for r in range(len(group))]
+
+
+def _ref_tables(world: World, mem_of: list[list[int]], dlat: np.ndarray, exact: np.ndarray, root_s: np.ndarray,
+                limits: np.ndarray, lines: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
                 lane_kappa: np.ndarray) -> dict[str, np.ndarray]:
     """What a tree node holds depends on its ref lane only (its offset aside): per lane as a
     node's ref, its members and everything about them (padded as in :class:`LaneTrees`), whether
     it is a leaf, the largest limit, the stretch and shrink of its members, and the lines' path
     positions relative to the node's offset. Built once per lane, so a tree of many nodes costs
-    no more than indexing these tables."""
+    no more than indexing these tables (``mem_of``: :func:`_members`)."""
     lanes = world.lanes.lanes
     n = len(lanes)
-    members_of = {g: sorted(np.flatnonzero(group == g).tolist(), key=lambda i: dlat[i]) for g in set(group.tolist())}
-    mem_of = [members_of[group[r]] if change else [r] for r in range(n)]
     m_max = max(len(m) for m in mem_of)
     _, _, line_lane, line_s = lines
     lines_on = {i: np.flatnonzero(line_lane == i) for i in range(n)}
@@ -366,18 +373,15 @@ def _ref_tables(world: World, group: np.ndarray, dlat: np.ndarray, exact: np.nda
     return t
 
 
-def _children(world: World, group: np.ndarray, dlat: np.ndarray, change: bool) -> tuple[np.ndarray, np.ndarray,
-                                                                                         np.ndarray]:
+def _children(world: World, group: np.ndarray, mem_of: list[list[int]], change: bool
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The children of a node by its ref lane and whether the ref is the node's natural lane (a
     node's natural lane is its ref or none): CSR ``ptr`` (2L+1,) over rows ``2·ref + natural``,
     the children's ``ref`` and ``natural`` flag, in the order the trees list them (with lane
     changes one child per group reached, on the natural lane's successor where there is one)."""
     lanes = world.lanes.lanes
-    n = len(lanes)
-    members_of = {g: sorted(np.flatnonzero(group == g).tolist(), key=lambda i: dlat[i]) for g in set(group.tolist())}
     ptr, ref, nat = [0], [], []
-    for r in range(n):
-        mem = members_of[group[r]] if change else [r]
+    for r, mem in enumerate(mem_of):
         for natural in (False, True):
             succ: dict[int, tuple[int, bool]] = {}  # child key → (ref, natural)
             for m in mem:
@@ -401,8 +405,9 @@ def _trees(world: World, group: np.ndarray, dlat: np.ndarray, exact: np.ndarray,
     :data:`MAX_NODES` nodes when the breadth-first queue reaches it."""
     n = len(world.lanes.lanes)
     length = world.lanes.length
-    tab = _ref_tables(world, group, dlat, exact, root_s, change, limits, lines, lane_kappa)
-    cptr, cref, cnat = _children(world, group, dlat, change)
+    mem_of = _members(group, dlat, change)
+    tab = _ref_tables(world, mem_of, dlat, exact, root_s, limits, lines, lane_kappa)
+    cptr, cref, cnat = _children(world, group, mem_of, change)
     # one level: tree, ref, natural flag, offset, parent and position within the tree
     tree, ref, nat = np.arange(n), np.arange(n), np.ones(n, dtype=bool)
     off, parent, pos = np.zeros(n), np.full(n, -1), np.zeros(n, dtype=int)
