@@ -10,18 +10,36 @@ predicates becomes one :class:`~twolevel.compiler.affine_block.AffineBlock`; a c
 :func:`~twolevel.compiler.collision.collision_free_builtin`). ``iff``/``xor`` need the exact
 values of both sides: those come from the ``exact`` hook (stage 2's
 :meth:`~twolevel.compiler.emitter.RowEmitter.value`).
+
+**The recorded past in one constant.** A past operator's window (``once``, ``historically``)
+reaching back over the trace's *settled prefix* — the leading samples every signal its operand
+reads has known at solve time: the recorded history — does not become one leaf per sample
+(``once[0:15]`` at 10 Hz reads 150 recorded samples at each step of the horizon). The operand's
+robustness over that prefix is computed once per encoding by the offline monitor itself
+(:func:`twolevel.monitor.robustness.robustness`, numpy over the prefix's arrays: the oracle judges
+the recorded past), and each window takes the max (min) of its part of it as one constant; the
+samples after the prefix are trees as before. The value is the same as the leaf-by-leaf tree
+(the monitor's semantics are the evaluator's), up to the rounding of a division (the monitor
+divides, the tree scales by the inverse). The prefix of an operand that reads ahead (``once
+eventually[0:1] …``) stops that far before the first unknown sample; an operand calling a
+built-in or naming another rule is evaluated leaf by leaf.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Callable, Mapping
+
+import numpy as np
 
 from twolevel.compiler.affine_block import vector_always
 from twolevel.compiler.codes import MIL501, MIL504, EncodeError, span_of
 from twolevel.compiler.signals import TraceSignals
 from twolevel.compiler.tree import INF, IntervalBounds, Op, Parents, Tree, add, mk, negate, scale
 from twolevel.compiler.types import Builtin
+from twolevel.monitor.robustness import robustness
 from twolevel.stl import ast
+from twolevel.stl.analysis import future_horizon, signals_read
 
 __all__ = ["Evaluator"]
 
@@ -52,6 +70,7 @@ class Evaluator:
         self.stable = stable
         self._memo: dict[tuple[int, int, float], Tree] = {}
         self._keep: list[object] = []  # formula nodes whose identity keys the memo
+        self._recorded: dict[int, tuple[ast.Node, np.ndarray | None]] = {}
 
     @property
     def length(self) -> int:
@@ -174,7 +193,7 @@ class Evaluator:
                 if fast is not None:
                     return fast
             is_max = op in ("eventually", "once")
-            return self._comb(is_max, [self.rob(n.operand, k, s) for k in w], s)
+            return self._comb(is_max, self._window_kids(n, w, s, is_max == (s > 0)), s)
         if isinstance(n, ast.BinTemporal):
             if n.op == "unless":
                 # RTAMT: phi unless[a,b] psi = always[0,b] phi or phi until[a,b] psi
@@ -208,6 +227,51 @@ class Evaluator:
         if isinstance(n, ast.Rule):
             return self.rob(n.formula, t, s)
         raise EncodeError(MIL504(f"cannot encode {type(n).__name__}", span_of(n)))
+
+    def _window_kids(self, n: ast.Temporal, w: range, s: float, take_max: bool) -> list[Tree]:
+        """``s`` · the operand's robustness over the window ``w``: a past operator's samples in
+        the settled prefix (:meth:`recorded`) as one constant (their max if ``take_max``, else
+        their min), the others as trees."""
+        start = w.start
+        kids: list[Tree] = []
+        if n.op in ast.PAST_OPS and len(w):
+            done = self.recorded(n.operand)
+            if done is not None and len(done) > w.start:
+                start = min(w.stop, len(done))
+                part = s * done[w.start:start]
+                kids.append(float(part.max() if take_max else part.min()))
+        kids += [self.rob(n.operand, k, s) for k in range(start, w.stop)]
+        return kids
+
+    def recorded(self, node: ast.Node) -> np.ndarray | None:
+        """The robustness of ``node`` at each sample of the settled prefix of the trace that it
+        can be judged on (the samples whose whole reach is known at solve time), by the offline
+        monitor in one pass; None when there is none or ``node`` holds what the monitor cannot
+        evaluate here (a built-in, another rule's name, a participant quantifier). Memoised per
+        node for the encoding."""
+        hit = self._recorded.get(id(node))
+        if hit is not None:
+            return hit[1]
+        out = self._recorded_new(node)
+        self._recorded[id(node)] = (node, out)
+        return out
+
+    def _recorded_new(self, node: ast.Node) -> np.ndarray | None:
+        if any(isinstance(m, (ast.Call, ast.Quantifier, ast.ParticipantSignal)) for m in node.walk()):
+            return None
+        names = {m for m in signals_read(node) if self.signals.const(m) is None}
+        if not names or names & self.rules.keys() or any(self.signals.get(m) is None for m in names):
+            return None
+        reach = future_horizon(node, self.dt)
+        if not math.isfinite(reach):
+            return None
+        k = min(self.signals.settled(m) for m in names)
+        known = k - math.ceil(reach / self.dt - 1e-9)
+        if known <= 0:
+            return None
+        rho = robustness(node, {m: self.signals.prefix(m, k) for m in names}, self.dt,
+                         consts=self.signals.consts)
+        return rho[:known]
 
     def _until(self, n: ast.BinTemporal, t: int, s: float) -> Tree:
         kids = []

@@ -108,6 +108,23 @@ class TraceSignals:
         self._leaf[key] = out
         return out
 
+    def settled(self, name: str) -> int:
+        """How many leading samples of signal ``name`` are known at solve time (the recorded
+        past, and every sample of a signal the plan cannot change): rows of an affine signal
+        before its first coefficient; the whole trace otherwise [samples]."""
+        s = self.signals.get(name)
+        if isinstance(s, AffineSignal):
+            counts = np.diff(s.coef.indptr)
+            return int(np.argmax(counts > 0)) if counts.any() else self.length
+        return self.length
+
+    def prefix(self, name: str, k: int) -> np.ndarray:
+        """The first ``k`` samples of signal ``name`` as values (``k`` ≤ :meth:`settled`)."""
+        s = self.signals[name]
+        if isinstance(s, AffineSignal):
+            return np.asarray(s.offset[:k], float)
+        return np.broadcast_to(np.asarray(s, float), (self.length,))[:k]
+
     def dense_width(self) -> int | None:
         """The column count every affine signal is expressed over (0 without affine signals,
         None if they differ)."""
