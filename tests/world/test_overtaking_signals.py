@@ -109,9 +109,10 @@ def test_the_mpc_encoding_agrees_with_the_monitor_on_its_plans(tmp_path: Path) -
     from twolevel.monitor.robustness import robustness
     from twolevel.world.world import load_rulesets
 
-    # never binding (the road's left edge is 3.5 m over the line), their robustness reads over_centre's
-    # largest value over the plan and the markings' flags (the 15 s past window of return_after_passing
-    # is left out: 150 recorded samples make each step's MILP slow)
+    # overtake_stalled loads rules/overtaking.stl; two more rules never binding (the road's left edge
+    # is 3.5 m over the line) whose robustness reads over_centre's largest value over the plan and
+    # the markings' flags. return_after_passing reads the recorded past: the controller gets the
+    # history, and the monitor judges past + now + plan
     bound = tmp_path / "bound.stl"
     bound.write_text("// reads over_centre, solid_left and no_overtaking over the next second\n"
                      "input float over_centre\ninput float solid_left\ninput float no_overtaking\n"
@@ -122,26 +123,31 @@ def test_the_mpc_encoding_agrees_with_the_monitor_on_its_plans(tmp_path: Path) -
     assert not [d for d in diags if d.is_error], [d.message for d in diags]
     ctrl = HighLevelController(w, sets, MPCSettings(H=10, dt=0.1, time_limit=None))
     by = {r.name: rs for rs in sets for r in rs.rules}
-    xs, res, _ = closed_loop(ctrl, w, 100)
+    assert {"return_after_passing", "no_solid_crossing", "over_bound"} <= {r.name for r in ctrl.rules}  # all encoded
+    reads = sorted(set().union(*(r.reads for r in ctrl.rules)) | {"x", "y"})  # the MPC reads the ego's path too
+    xs, res, _ = closed_loop(ctrl, w, 100, history_names=reads)
+    cols = ("x", "y", "psi", "v")
+    lived = signals_along(w, None, {k: xs[:, i] for i, k in enumerate(cols)})
+    depth = ctrl.history_depth
     checked = 0
-    for r in res:
+    for i, r in enumerate(res):
         if not r.ok:
             continue
         xyv = r.states
-        sig = signals_along(w, None, {"x": xyv[:, 0], "y": xyv[:, 1], "psi": xyv[:, 2], "v": xyv[:, 3]})
-        for name in ("over_bound", "marks"):
+        plan = signals_along(w, None, {k: xyv[:, j] for j, k in enumerate(cols)})
+        lo = max(0, i - depth)
+        sig = {n: np.concatenate([lived[n][lo:i], plan[n]]) for n in NAMES}
+        for name in ("over_bound", "marks", "no_solid_crossing", "no_overtaking_zone", "return_after_passing"):
             rs = by[name]
-            true = float(robustness(rs.formula(name), sig, 0.1, consts=rs.consts)[0])
+            true = float(robustness(rs.formula(name), sig, 0.1, consts=rs.consts)[i - lo])
             claimed = r.rule_robustness[name]
-            assert claimed >= -1e-6 and true >= -1e-6, (name, true, claimed)
+            assert claimed >= -1e-6 and true >= -1e-6, (i, name, true, claimed)
             if np.isfinite(true) and np.isfinite(claimed):
                 # e is linearised about the previous plan (centimetres on a straight road)
-                assert true == pytest.approx(claimed, abs=0.05), (name, true, claimed)
+                assert true == pytest.approx(claimed, abs=0.05), (i, name, true, claimed)
         checked += 1
     assert checked > 80
-    over = np.array([signals_along(w, None, {k: np.array([x[i]]) for i, k in enumerate(("x", "y", "psi", "v"))}
-                                   )["over_centre"][0] for x in xs])
-    assert over.max() > 0.5  # it did pass over the centre line, so over_centre's encoding was read out there
+    assert lived["over_centre"].max() > 0.5  # it did pass over the centre line, so over_centre's encoding was read out there
 
 
 @pytest.mark.slow
@@ -164,3 +170,36 @@ def test_the_rules_hold_on_the_stalled_car_pass(tmp_path: Path) -> None:
     for rule in out["rules"]:
         series = np.array([np.inf if v == "inf" else v for v in rule["series"]], dtype=float)
         assert (series >= 0).all(), rule["name"]
+
+
+def test_the_mpc_returns_within_fifteen_seconds_of_leaving_its_lane() -> None:
+    """return_after_passing binds on the recorded past: 0.4 m over the centre line for 14 s, the
+    plan is back inside by the end of its first second (15 s); over for 4 s, nothing presses."""
+    from twolevel.control.high_level.controller import HighLevelController
+    from twolevel.control.high_level.settings import MPCSettings
+    from twolevel.world.provided import SIGNALS
+    from twolevel.world.world import load_rulesets
+
+    w = load_world(ROOT / "scenarios" / "everyday" / "overtake_stalled.yaml")  # it loads rules/overtaking.stl
+    sets, diags = load_rulesets(w)
+    assert not [d for d in diags if d.is_error]
+    ctrl = HighLevelController(w, sets, MPCSettings(H=10, dt=0.1, time_limit=None))
+    assert "return_after_passing" in {r.name for r in ctrl.rules}
+    cols = ("x", "y", "psi", "v")
+
+    def drive(over: int) -> np.ndarray:
+        """The plan's over_centre after 150 recorded samples at 10 m/s on the dashed stretch
+        (route s 30–180 m, past the stalled car), the last ``over`` of them 0.4 m over the line."""
+        s = 30.0 + np.arange(151.0)
+        e = np.where(np.arange(151) < 150 - over, 0.0, 1.75 - w.ego.width / 2 + 0.4)
+        xy = w.route.position(s, e)
+        lived = signals_along(w, None, {"x": xy[:, 0], "y": xy[:, 1], "psi": w.route.heading_at(s), "v": np.full(151, 10.0)})
+        history = {k: np.asarray(lived[k])[:-1] for k in SIGNALS if k in lived}
+        assert history["over_centre"][-1] == pytest.approx(0.4) and not history["solid_left"].any()
+        r = ctrl.solve(np.array([xy[-1, 0], xy[-1, 1], float(w.route.heading_at(s[-1:])[0]), 10.0]), 15.0, w.traffic0,
+                       history)
+        assert r.ok
+        return signals_along(w, None, {k: r.states[:, j] for j, k in enumerate(cols)})["over_centre"]
+
+    assert drive(140)[10] <= 1e-3  # over since 14 s ago: inside again at 15 s
+    assert drive(40)[10] > 0.03  # over since 4 s ago: the plan returns at its own pace
