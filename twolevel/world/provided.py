@@ -68,9 +68,19 @@ priority      1/0    0         1 when o goes before the ego there (arm prioritie
                                way to oncoming traffic, lights)
 d_exit        m      −inf      how far the ego's rear has to go along the route to leave its zone of
                                the conflict with o's way (< 0 once left)
+d_behind      m      +inf      the ego's rear minus o's front along the route, (s − L/2) − (s_o + l_o):
+                               > 0 when o is behind the ego (d_lon(o)'s mirror); o is *beside* the
+                               ego while d_lon(o) ≤ 0 and d_behind(o) ≤ 0
+left_of       m      −inf      how far o's body lies left of the ego's, (e_o − h_o) − (e + W/2): > 0
+                               when o is wholly to the ego's left; −inf when o does not run the
+                               route's way (heading within 45°: oncoming traffic is never left_of)
 ============  =====  ========  =====================================================================
 
-The last three (and the ego's d_zone … t_zone_out) are :mod:`twolevel.world.right_of_way`'s.
+In ``d_behind`` and ``left_of`` the ego's box is taken along the route (L, W its length and width;
+its heading relative to the route left out, as for ``over_centre``: affine in s and e, as the MPC
+encodes them).
+
+t_reach … d_exit (and the ego's d_zone … t_zone_out) are :mod:`twolevel.world.right_of_way`'s.
 
 A participant is *present* at a sample when it is active and within ``r_near`` of the ego; the
 signal ``present[ID]`` (:data:`twolevel.stl.analysis.PRESENT`) is then +inf, else −inf, and its
@@ -101,7 +111,7 @@ PROVIDED_SIGNALS: frozenset[str] = frozenset(SIGNALS)
 """The same names as a set (what the type checker accepts as a rule's inputs)."""
 
 PARTICIPANT_SIGNALS: tuple[str, ...] = ("v", "a", "d_lon", "d_lat", "in_same_lane", "cut_in", "precedes", "t_reach",
-                                        "t_clear", "priority", "d_exit")
+                                        "t_clear", "priority", "d_exit", "d_behind", "left_of")
 """Every participant signal the world provides, in the order of the table above."""
 
 PROVIDED_PARTICIPANT_SIGNALS: frozenset[str] = frozenset(PARTICIPANT_SIGNALS)
@@ -110,7 +120,7 @@ PROVIDED_PARTICIPANT_SIGNALS: frozenset[str] = frozenset(PARTICIPANT_SIGNALS)
 PARTICIPANT_ABSENT: Mapping[str, float] = MappingProxyType({
     "v": 0.0, "a": 0.0, "d_lon": math.inf, "d_lat": math.inf, "in_same_lane": -math.inf, "cut_in": -math.inf,
     "precedes": -math.inf, "t_reach": math.inf, "t_clear": 0.0, "priority": 0.0,
-    "d_exit": -math.inf})
+    "d_exit": -math.inf, "d_behind": math.inf, "left_of": -math.inf})
 """Each participant signal's value where its participant is absent."""
 
 __all__ = ["SIGNALS", "PROVIDED_SIGNALS", "PARTICIPANT_SIGNALS", "PROVIDED_PARTICIPANT_SIGNALS",

@@ -11,7 +11,9 @@ The correspondence with CommonRoad's predicates (Maierhofer et al. 2020, commonr
 each in metres and unscaled: ``d_lon(o) > 0`` is ``in_front_of(ego, o)``, ``in_same_lane(o)`` is
 ``in_same_lane(ego, o)`` (lanes as bands of the route lane's width), ``cut_in(o)`` is
 ``cut_in(o, ego)`` with the lateral motion towards the ego over one second instead of the heading,
-``precedes(o)`` is the meta-predicate ``precedes(ego, o)``.
+``precedes(o)`` is the meta-predicate ``precedes(ego, o)``; ``left_of(o) > 0`` with
+``d_lon(o) ≤ 0`` and ``d_behind(o) ≤ 0`` is ``left_of(o, ego)`` (o beside the ego, wholly to its
+left), running the route's way.
 """
 
 from __future__ import annotations
@@ -101,6 +103,9 @@ def relations(route: Route, ego: Mapping[str, np.ndarray], ego_box: tuple[float,
     others_near = np.broadcast_to(near[..., None, :], between.shape) & ~np.eye(n, dtype=bool)
     free = np.where(others_near, between, np.inf).min(axis=-1, initial=np.inf)
     out["precedes"] = np.minimum(np.minimum(same, out["d_lon"]), free)
+    # the ego's box along the route here (its heading left out: affine in s and e)
+    out["d_behind"] = (s - 0.5 * ego_box[0]) - (so + lo_)
+    out["left_of"] = np.where(same_way(tho, 0.0), (eo - ho) - (e + 0.5 * ego_box[1]), -np.inf)
     with np.errstate(invalid="ignore"):
         return {name: np.where(near, val, PARTICIPANT_ABSENT[name]) for name, val in out.items()}
 

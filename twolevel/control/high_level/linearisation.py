@@ -23,6 +23,7 @@ import numpy as np
 from twolevel.control.high_level.overtaking import oncoming_band
 from twolevel.control.high_level.guards import (Pass, RssTerminal, TerminalStop, drivable_band, rss_terminal,
                                                 stop_lines, terminal_stop)
+from twolevel.control.high_level.neighbours import NEIGHBOUR_SIGNALS, NeighbourConstants, neighbour_constants
 from twolevel.control.high_level.right_of_way import ZoneConstants, give_way_line, zone_constants
 from twolevel.control.high_level.reference import reference, reference_controls, wrap_to
 from twolevel.control.high_level.settings import MPCSettings
@@ -86,6 +87,7 @@ class StepData:
     steer_ref: np.ndarray | None = None
     steer_weight: np.ndarray | None = None
     zones: ZoneConstants | None = None
+    neighbours: NeighbourConstants | None = None
 
     @property
     def N(self) -> int:
@@ -254,7 +256,9 @@ def prepare_step(
     steer_weight = steering_weight(v_bar, params.l_f) if settings.lateral_weight else None
     return StepData(t, x0, np.asarray(u_prev, float), xs_bar, us_bar, A, B, c, omega, s_ref, s_bar, h_bar, p_bar,
                     lo, hi, hc, width, e_lo, e_hi, term, steering_bound(v_bar, kappa, params), steps, H, rss,
-                    steering_reference(kappa, params) if settings.lateral_weight else None, steer_weight, zones)
+                    steering_reference(kappa, params) if settings.lateral_weight else None, steer_weight, zones,
+                    neighbour_constants(world, hc, s_bar, H) if set(NEIGHBOUR_SIGNALS) & set(world.participant_signals)
+                    else None)
 
 
 PASS_FROM_REST = 3.0

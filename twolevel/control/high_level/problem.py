@@ -51,6 +51,7 @@ from twolevel.compiler.signals import AffineSignal
 from twolevel.compiler.types import Encoding, Requirement
 from twolevel.control.codes import MIL517
 from twolevel.control.high_level.linearisation import StepData
+from twolevel.control.high_level.neighbours import neighbour_signals_over
 from twolevel.control.high_level.right_of_way import zone_signals_over
 from twolevel.control.high_level.settings import MPCSettings, Weights
 from twolevel.diagnostics import Diagnostic, Span
@@ -217,6 +218,12 @@ def trace_signals(step: StepData, lay: Layout, n: int, past: Mapping[str, np.nda
             out[name] = np.concatenate([hist(name, float(len(hc.index)))[:-1], np.full(H + 1, float(len(hc.index)))])
     out.update(zone_signals_over(step.zones, names, H, P,
                                  lambda pst, c: _affine(xy, -t_hat, c - s_off, np.append(pst, c - s_now), n), hist))
+    out.update(neighbour_signals_over(
+        step.neighbours, names, H, P,
+        lambda pst, c: _affine(xy, -t_hat, c[1:] - s_off, np.append(pst, c[0] - s_now), n),  # c − s_k
+        lambda pst, c: _affine(xy, t_hat, s_off - c[1:], np.append(pst, s_now - c[0]), n),  # s_k − c
+        lambda pst, c: _affine(xy, -n_hat, c[1:] - e_off, np.append(pst, c[0] - e_now), n),  # c − e_k
+        hist))
     return out
 
 

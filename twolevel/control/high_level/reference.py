@@ -19,6 +19,7 @@ import numpy as np
 
 from twolevel.control.high_level.guards import (BESIDE_FROM, LATERAL_MARGIN, Front, Pass, beside_steps,
                                                 drivable_band, free_sides, front_of, stop_lines)
+from twolevel.control.high_level.neighbours import left_leader
 from twolevel.control.high_level.overtaking import (lateral_due, lateral_share, oncoming_band, oncoming_free, out_of_lane,
                                                     waiting_room)
 from twolevel.control.high_level.settings import MPCSettings
@@ -199,6 +200,12 @@ def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, set
                                                                     settings.stop_decel))
             room = waiting_room(world, params, front, s0, float(e_arr[0]), lateral)  # to pull out from
             follow = Follow(front.s, front.v, front.offset + world.settings.D_safe + room, gentle)
+    if follow is None and "left_of" in world.participant_signals:  # a rule reads it: no_passing_right
+        left = left_leader(hc, world.parts.length, world.parts.width, s0, float(e_arr[0]), world.ego.length,
+                           world.ego.width, float(v_ref.max()), times)
+        if left is not None:  # draw level with it no faster than it, braking gently
+            b = settings.stop_decel  # safe_speed is then sqrt(v_o² + 2·b·gap)
+            follow = Follow(left[0], left[1], 0.0, ResponseBounds(time=0.0, accel_max=0.0, brake_min=b, brake_max=b))
     if math.isfinite(s_end) or follow is not None:
         s_ref, v_ref = _reference_to(route, s0, max(float(x0[3]), 0.0), steps, s_end, settings.stop_decel,
                                      comfort.accel, follow)

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from typing import Sequence
 
 from twolevel.control.codes import MIL510
+from twolevel.control.high_level.neighbours import MPC_NEIGHBOUR_PATTERNS
 from twolevel.control.high_level.right_of_way import MPC_ZONE_PATTERNS
 from twolevel.diagnostics import Diagnostic, Span
 from twolevel.stl import analysis, ast
@@ -19,10 +20,11 @@ from twolevel.world.provided import PROVIDED_SIGNALS
 
 __all__ = ["MPC_SIGNALS", "MpcRule", "mpc_rules"]
 
-MPC_SIGNALS = (PROVIDED_SIGNALS - {"min_gap", "t_zone", "t_zone_out"}) | MPC_ZONE_PATTERNS
+MPC_SIGNALS = (PROVIDED_SIGNALS - {"min_gap", "t_zone", "t_zone_out"}) | MPC_ZONE_PATTERNS | MPC_NEIGHBOUR_PATTERNS
 """The signals the MPC predicts over its horizon (:mod:`twolevel.control.high_level.problem`):
-every provided one but the boxes' separation and the ego's times to a conflict area (1/v), and
-the participant signals of right of way (:mod:`twolevel.control.high_level.right_of_way`)."""
+every provided one but the boxes' separation and the ego's times to a conflict area (1/v), the
+participant signals of right of way (:mod:`twolevel.control.high_level.right_of_way`) and
+those of the vehicles around the ego (:mod:`twolevel.control.high_level.neighbours`)."""
 
 
 @dataclass(frozen=True, eq=False)
