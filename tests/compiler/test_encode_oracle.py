@@ -5,11 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from twolevel.milp.builder import ModelBuilder
 from twolevel.monitor.robustness import robustness
 
 from helpers.milp_oracle import check_optimal_robustness, check_satisfaction_of_a_fixed_trajectory
-from helpers.milp_systems import DT, PAST, T, double_integrator, random_formula
+from helpers.milp_systems import DT, PAST, T, random_formula, with_known
 
 NOW = PAST  # trace index of the current sample
 SEEDS = range(120)
@@ -30,23 +29,15 @@ def _monitor(f, p, v, c, times):
     return min(float(rho[t]) for t in times)
 
 
-def _signals(p_past, v_past, c):
-    def add(b: ModelBuilder):
-        pb, vb, ab, sig = double_integrator(b, p_past, v_past)
-        sig["c"] = c
-        return pb, vb, ab, sig
-    return add
-
-
 @pytest.mark.parametrize("seed", SEEDS)
 def test_satisfaction_of_a_fixed_trajectory_matches_the_monitor(seed: int) -> None:
     rng, f, p_past, v_past, c, times = _case(seed)
-    check_satisfaction_of_a_fixed_trajectory(rng, f, times, p_past, v_past, _signals(p_past, v_past, c),
+    check_satisfaction_of_a_fixed_trajectory(rng, f, times, p_past, v_past, with_known(p_past, v_past, c),
                                              lambda p, v: _monitor(f, p, v, c, times))
 
 
 @pytest.mark.parametrize("seed", SEEDS)
 def test_optimal_robustness_equals_the_monitor_of_the_plan(seed: int) -> None:
     _, f, p_past, v_past, c, times = _case(seed)
-    check_optimal_robustness(f, times, p_past, v_past, _signals(p_past, v_past, c),
+    check_optimal_robustness(f, times, p_past, v_past, with_known(p_past, v_past, c),
                              lambda p, v: _monitor(f, p, v, c, times))

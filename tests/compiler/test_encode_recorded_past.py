@@ -15,7 +15,7 @@ from twolevel.monitor.robustness import robustness
 from twolevel.stl import ast
 
 from helpers.milp_oracle import check_optimal_robustness, check_satisfaction_of_a_fixed_trajectory
-from helpers.milp_systems import DT, H, double_integrator, random_formula
+from helpers.milp_systems import DT, H, double_integrator, random_formula, with_known
 
 PAST = 40  # recorded samples before now
 SEEDS = range(40)
@@ -36,14 +36,6 @@ def _case(seed: int):
     return rng, f, p_past, v_past, c
 
 
-def _signals(p_past, v_past, c):
-    def add(b: ModelBuilder):
-        pb, vb, ab, sig = double_integrator(b, p_past, v_past)
-        sig["c"] = c
-        return pb, vb, ab, sig
-    return add
-
-
 def _monitor(f, c):
     return lambda p, v: float(robustness(f, {"p": p, "v": v, "c": c}, DT)[PAST])
 
@@ -51,14 +43,14 @@ def _monitor(f, c):
 @pytest.mark.parametrize("seed", SEEDS)
 def test_satisfaction_over_a_long_past_matches_the_monitor(seed: int) -> None:
     rng, f, p_past, v_past, c = _case(seed)
-    check_satisfaction_of_a_fixed_trajectory(rng, f, (PAST,), p_past, v_past, _signals(p_past, v_past, c),
+    check_satisfaction_of_a_fixed_trajectory(rng, f, (PAST,), p_past, v_past, with_known(p_past, v_past, c),
                                              _monitor(f, c))
 
 
 @pytest.mark.parametrize("seed", SEEDS)
 def test_optimal_robustness_over_a_long_past_equals_the_monitor(seed: int) -> None:
     _, f, p_past, v_past, c = _case(seed)
-    check_optimal_robustness(f, (PAST,), p_past, v_past, _signals(p_past, v_past, c), _monitor(f, c))
+    check_optimal_robustness(f, (PAST,), p_past, v_past, with_known(p_past, v_past, c), _monitor(f, c))
 
 
 class _Reads(TraceSignals):

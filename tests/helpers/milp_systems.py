@@ -51,6 +51,16 @@ def double_integrator(builder: ModelBuilder, p_past: np.ndarray, v_past: np.ndar
     return p, v, a, sig
 
 
+def with_known(p_past: np.ndarray, v_past: np.ndarray, c: np.ndarray):
+    """The :func:`double_integrator` with a signal ``c`` known over the whole trace, as the
+    oracle checks of :mod:`helpers.milp_oracle` take it (``builder`` → blocks and signals)."""
+    def add(builder: ModelBuilder):
+        pb, vb, ab, sig = double_integrator(builder, p_past, v_past)
+        sig["c"] = c
+        return pb, vb, ab, sig
+    return add
+
+
 def rollout(p0: float, v0: float, acc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     p, v = [p0], [v0]
     for a in acc:
