@@ -123,7 +123,6 @@ def neighbour_signals_over(nc: NeighbourConstants | None, names: frozenset[str] 
     return out
 
 
-
 def left_leader(hc: HorizonConstants, lengths: np.ndarray, widths: np.ndarray, s0: float, e0: float, length: float,
                 width: float, v_des: float, times: np.ndarray) -> tuple[np.ndarray, float] | None:
     """The vehicle the MPC's reference must not draw level with faster than it: among the
@@ -142,7 +141,6 @@ def left_leader(hc: HorizonConstants, lengths: np.ndarray, widths: np.ndarray, s
     ok = ((hc.seen_v > 0.0) & (hc.seen_e - 0.5 * wo > e0 + 0.5 * width) & (rear > s0) & (hc.seen_v < v_des))
     if not ok.any():
         return None
-    v_des = max(v_des, 1e-3)
     reach = np.where(ok, (rear - s0) / np.maximum(v_des - hc.seen_v, 1e-3), np.inf)  # when the ego would be level
     j = int(np.argmin(reach))
     return rear[j] + hc.seen_v[j] * np.asarray(times, float), float(hc.seen_v[j])
