@@ -87,6 +87,7 @@ segment = st.one_of(st.builds(lambda L: {"line": L}, st.floats(5, 80)),
 
 @settings(max_examples=15, deadline=None)
 @example([{"arc": {"radius": 15.0, "angle": 69.0}}], 4.0, 3.0, 0.0, 0.0, 0)  # laterals 2e-5 m apart
+@example([{"line": 18.0}, {"arc": {"radius": 15.0, "angle": 45.0}}], 3.0, 3.0, 0.0, 0.0, 0)  # s 0.02 m apart by the joint
 @given(st.lists(segment, min_size=1, max_size=3), st.floats(2.8, 4.0), st.floats(2.8, 4.0), st.floats(0, 1),
        st.floats(0, 1), st.integers(0, 2**31 - 1))
 def test_free_form_lanes_from_road_boundaries_are_the_same_lanes(tmp_path_factory, segments, w1, w2, f1, f2, seed):
@@ -146,7 +147,9 @@ def test_free_form_lanes_from_road_boundaries_are_the_same_lanes(tmp_path_factor
     ego = {"x": xy[:, 0], "y": xy[:, 1], "psi": ra.heading_at(u * ra.length), "v": 8.0 * (1 - u) * (0.5 + f2)}
     tr = [TrafficLog.of([w.traffic0] * T, w.parts.length, w.parts.width) for w in worlds]
     sa_, sb_ = signals_along(road_w, tr[0], ego), signals_along(free_w, tr[1], ego)
-    tol = {"min_gap": 0.03 + 4e-4 * ra.length, "s": 2e-4 * ra.length + 1e-6, "d_stop": 4e-4 * ra.length + 1e-6, "d_light": 4e-4 * ra.length + 1e-6,
+    # the two polylines place their vertices differently about a line-arc joint: a point 0.7 m off
+    # the centre there projects up to 2 cm apart along the route (tight arc, r = 15 m)
+    tol = {"min_gap": 0.03 + 4e-4 * ra.length, "s": 0.03 + 2e-4 * ra.length, "d_stop": 4e-4 * ra.length + 1e-6, "d_light": 4e-4 * ra.length + 1e-6,
            "d_lead": 4e-4 * ra.length + 1e-6, "rss_gap": 4e-4 * ra.length + 1e-6, "e": 1e-3,
            "over_centre": 1e-3}  # e plus the centre line's offset
     for name in sa_:
