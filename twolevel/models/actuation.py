@@ -17,6 +17,7 @@ actuator range and are what the high-level MPC's acceleration a is turned into.
 
 from __future__ import annotations
 
+import functools
 from typing import Any, Sequence
 
 import numpy as np
@@ -97,9 +98,10 @@ def drive_force_available(v: Any, p: VehicleParams, xp: Any = np, ax: Any = 0.0)
     return (drive[0] + drive[1] + drive[2] + drive[3]) / p.R_w
 
 
+@functools.lru_cache(maxsize=16)
 def brake_force_available(p: VehicleParams) -> float:
     """Brake force at γ = −1 [N] (independent of speed; with the ideal load-proportional brake
-    distribution it does not depend on the load transfer either)."""
+    distribution it does not depend on the load transfer either); computed once per parameter set."""
     _, brake = wheel_torques(-1.0, 0.0, _loads(p), p, np)
     return float(np.sum(brake)) / p.R_w
 

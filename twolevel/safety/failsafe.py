@@ -248,6 +248,12 @@ def roll(x0: np.ndarray, plan: list[Manoeuvre], route: Route, s0: float, dt: flo
     path = tuple(np.array([getattr(m, f) for m in plan])
                  for f in ("e_out", "s_out", "d_out", "e_goal", "s_return", "d_return"))
     returning = ~np.isnan(path[3])
+    path_end = path[4] + path[5]
+    path_rows = tuple(p[:, None] for p in path)
+    has_clear = ~np.isnan(clear_a)
+    ca = np.nan_to_num(clear_a)
+    ca_col, decel_col, full_col = ca[:, None], decel[:, None], is_full[:, None]
+    s_last = float(route.s[-1])
     e_from: np.ndarray | None = None
     L = params.wheelbase
     n_max = int(math.ceil(st.max_time / dt))
@@ -264,8 +270,7 @@ def roll(x0: np.ndarray, plan: list[Manoeuvre], route: Route, s0: float, dt: flo
         if e_from is None:
             e_from = e.copy()[:, None]
         # the profile: clear (hold clear_a until s_clear), then brake at decel to standstill
-        clearing = ~np.isnan(clear_a) & (s < s_clear)
-        ca = np.nan_to_num(clear_a)
+        clearing = has_clear & (s < s_clear)
         with np.errstate(divide="ignore", invalid="ignore"):
             t_c = np.where(clearing, np.where(np.abs(ca) > 1e-9,
                                               (-v + np.sqrt(np.maximum(v**2 + 2 * ca * (s_clear - s), 0.0))) / ca,
@@ -275,21 +280,21 @@ def roll(x0: np.ndarray, plan: list[Manoeuvre], route: Route, s0: float, dt: flo
         need = t_c + v_c / decel + 2 * dt
         n = int(min(n_max - done, bucket * math.ceil(float(need[stop_at < 0].max()) / (bucket * dt) + 1e-9)))
         n = max(n, 1)
-        if (returning & (stop_at < 0) & (s < path[4] + path[5])).any():  # on a path: closed loop twice a second
+        if (returning & (stop_at < 0) & (s < path_end)).any():  # on a path: closed loop twice a second
             n = min(n, max(1, bucket // 2))
         tk = dt * np.arange(n)[None, :]
         in_clear = clearing[:, None] & (tk < t_c[:, None])
         tb = np.maximum(tk - t_c[:, None], 0.0)
-        v_pred = np.where(in_clear, v[:, None] + ca[:, None] * tk, np.maximum(v_c[:, None] - decel[:, None] * tb, 0.0))
+        v_pred = np.where(in_clear, v[:, None] + ca_col * tk, np.maximum(v_c[:, None] - decel_col * tb, 0.0))
         s_c = s + v * t_c + 0.5 * ca * clearing * t_c**2
-        tb_stop = np.minimum(tb, v_c[:, None] / decel[:, None])
-        s_pred = np.where(in_clear, s[:, None] + v[:, None] * tk + 0.5 * ca[:, None] * tk**2,
-                          s_c[:, None] + v_c[:, None] * tb_stop - 0.5 * decel[:, None] * tb_stop**2)
-        a_k = np.where(in_clear, ca[:, None], -decel[:, None])
-        gamma = np.where(is_full[:, None] & ~in_clear, -1.0, gamma_from_accel(a_k, v_pred, params))
+        tb_stop = np.minimum(tb, v_c[:, None] / decel_col)
+        s_pred = np.where(in_clear, s[:, None] + v[:, None] * tk + 0.5 * ca_col * tk**2,
+                          s_c[:, None] + v_c[:, None] * tb_stop - 0.5 * decel_col * tb_stop**2)
+        a_k = np.where(in_clear, ca_col, -decel_col)
+        gamma = np.where(full_col & ~in_clear, -1.0, gamma_from_accel(a_k, v_pred, params))
         # steering: curvature along the profile + Stanley's correction, faded out over a second
-        _, _, path_curv = return_path(e_from, tuple(p[:, None] for p in path), s_pred)
-        ff = np.arctan(L * (route.curvature_at(np.minimum(s_pred, route.s[-1])) + path_curv))
+        _, _, path_curv = return_path(e_from, path_rows, s_pred)
+        ff = np.arctan(L * (route.curvature_at(np.minimum(s_pred, s_last)) + path_curv))
         fade = np.clip(1.0 - tk / 1.0, 0.0, 1.0)
         e_path, slope, _ = return_path(e_from[:, 0], path, s)
         fb = -(st.k_heading * (e_psi - np.arctan(slope)) + np.arctan2(st.k_lateral * (e - e_path), v + 1.0))
