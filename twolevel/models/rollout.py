@@ -48,14 +48,21 @@ _DEFAULT = VehicleParams()
 
 @dataclass(frozen=True)
 class Rollout:
-    """K simulated trajectories of H steps.
+    """K simulated trajectories of H steps of a car ``length`` × ``width`` [m].
 
     states: (K, H+1, 12) detailed-model states (see :mod:`twolevel.models.fourwheel`), states[:, 0] = x0.
-    boxes: (K, H+1, 4, 2) oriented bounding-box corners [m], counter-clockwise from the rear right.
     """
 
     states: NDArray[np.float64]
-    boxes: NDArray[np.float64]
+    length: float
+    width: float
+
+    @functools.cached_property
+    def boxes(self) -> NDArray[np.float64]:
+        """(K, H+1, 4, 2) oriented bounding-box corners [m], counter-clockwise from the rear right
+        (computed when first asked for: most callers read the states only)."""
+        s = self.states
+        return box_corners(s[..., 0], s[..., 1], s[..., 2], self.length, self.width)
 
 
 @functools.lru_cache(maxsize=8)
@@ -167,8 +174,7 @@ def _simulate(x0: ArrayLike, controls: ArrayLike, dt: float, p: VehicleParams, b
         states = np.concatenate([x[:, None, :], out.reshape(fw.NX, K, H).transpose(1, 2, 0)], axis=1)
     else:
         raise ValueError(f"unknown backend {backend!r}")
-    boxes = box_corners(states[..., 0], states[..., 1], states[..., 2], p.length, p.width)
-    return Rollout(states=states, boxes=boxes)
+    return Rollout(states, p.length, p.width)
 
 
 def _simulate_numpy(x: NDArray[np.float64], u: NDArray[np.float64], dt: float, p: VehicleParams,

@@ -21,7 +21,6 @@ import numpy as np
 from twolevel.control.low_level.judge import Judge
 from twolevel.control.low_level.prediction import Predictor
 from twolevel.models.actuation import accel_from_gamma
-from twolevel.models.obb import box_corners
 from twolevel.models.rollout import Rollout
 
 __all__ = ["Screened", "screen", "continued"]
@@ -77,7 +76,4 @@ def continued(predictor: Predictor, screened: Screened, cand: np.ndarray, tm: di
     p = predictor.params
     j, pre = screened.done, screened.prefix
     rest = predictor.candidates(pre[:, -1], cand[:, j:], tm)
-    states = np.concatenate([pre, rest.states[:, 1:]], axis=1)
-    boxes = np.concatenate([box_corners(pre[..., 0], pre[..., 1], pre[..., 2], p.length, p.width),
-                            rest.boxes[:, 1:]], axis=1)
-    return Rollout(states=states, boxes=boxes)
+    return Rollout(np.concatenate([pre, rest.states[:, 1:]], axis=1), p.length, p.width)
