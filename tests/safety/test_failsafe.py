@@ -7,10 +7,12 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from helpers.safety_worlds import ego_on, world
 from twolevel.models import fourwheel as fw
-from twolevel.safety.failsafe import FULL, FailSafeSettings, Manoeuvre, brake_rate, manoeuvres, roll
+from twolevel.safety.failsafe import FULL, PASS_PACE, FailSafeSettings, Manoeuvre, brake_rate, manoeuvres, roll
 from twolevel.safety.network import network_of
 from twolevel.safety.verify import ego_params
 
@@ -64,3 +66,30 @@ def test_no_clearing_without_a_zone_in_reach():
     assert [m.name for m in far] == ["brake 4", "brake 6", "brake full"]
     near = manoeuvres(FailSafeSettings(), net.zones, 10.0, 10.0, 9.0)
     assert len(near) == 7 and near[3].name.startswith("clear +0 to")
+
+
+@settings(max_examples=200, deadline=None)
+@given(v0=st.floats(0.0, 15.0), ahead=st.floats(0.0, 300.0))
+def test_completing_a_pass_at_its_speed_only_at_a_pace_that_gets_there(v0, ahead):
+    """A car out of its lane beside what it passes completes the pass keeping its speed only at
+    PASS_PACE or more and when that gets it past within max_time (a crawl would not brake before
+    its time is up: its rollout ran to max_time in half-second segments, to fail); gaining speed,
+    creeping back and braking back into the lane are always tried."""
+    fs = FailSafeSettings()
+    s0 = 50.0
+    plan = manoeuvres(fs, np.zeros((0, 2)), s0, v0, 9.0, (0.0, s0 + ahead, 3.0))
+    keep = [m for m in plan if m.clear_accel == 0.0]
+    gain = [m for m in plan if m.clear_accel is not None and m.clear_accel > 1.0]
+    assert len(gain) == 1 and sum(m.clear_accel == 1.0 for m in plan) == 1  # the creep
+    assert {m.decel for m in plan if m.clear_accel is None} == {min(fs.decels), max(fs.decels)}
+    distance = gain[0].s_clear - s0
+    assert len(keep) == (1 if v0 >= PASS_PACE and distance <= v0 * fs.max_time else 0)
+
+
+def test_a_kept_crawl_too_slow_for_the_distance_does_not_stop_in_time():
+    """What the pace rule leaves out fails anyway: keeping 1.1 m/s to a point 40 m ahead does not
+    stop within max_time on the detailed model."""
+    w = world("stalled")
+    p = ego_params(w)
+    (fs,) = roll(ego_on(w, "road", 10.0, 1.1), [Manoeuvre(4.0, 0.0, 50.0)], w.route, 10.0, w.settings.dt, p)
+    assert not fs.stopped and fs.t_stop == pytest.approx(FailSafeSettings().max_time)

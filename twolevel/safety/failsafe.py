@@ -158,16 +158,34 @@ def manoeuvres(settings: FailSafeSettings, zones: np.ndarray, s0: float, v0: flo
     if ahead:
         s_clear = float(ahead[0][1]) + settings.clear_margin
         out += [Manoeuvre(b, a, s_clear) for b in settings.clear_brakes for a in settings.clear_accels
-                if not (a <= 0 and v0 < 0.5)]  # keeping a standstill clears nothing
+                if _moves(a, v0, s_clear - s0, settings.max_time)]
     return out
+
+
+KEEP_MIN = 0.5
+"""[m/s] Below this speed, keeping it clears nothing: a manoeuvre that clears a zone or completes a
+pass from a (near) standstill gains speed."""
+
+
+PASS_PACE = 3.0
+"""[m/s] The slowest speed a pass is completed at: the path out and back is laid out for it, and
+slower the car gains speed to complete it."""
+
+
+def _moves(accel: float, v0: float, distance: float, max_time: float, pace: float = KEEP_MIN) -> bool:
+    """Whether holding ``accel`` [m/s²] from speed ``v0`` [m/s] gets to a point ``distance`` [m]
+    ahead within ``max_time`` [s]: keeping a speed below ``pace`` [m/s] does not count, nor one too
+    slow for the distance (the manoeuvre would not brake before its time is up: its rollout, in
+    half-second segments when it returns to the lane, would run to ``max_time`` and fail)."""
+    return accel > 0 or (v0 >= pace and distance <= v0 * max_time)
 
 
 def _returning(settings: FailSafeSettings, s0: float, v0: float, brake_full: float, e_goal: float,
                s_past: float, e_beside: float) -> list[Manoeuvre]:
     """:func:`manoeuvres` for a car out of the route's lane (its ``back``): the gentlest and the
-    full braking level, the creep, and completing the pass at the speed it has or gaining 1.5
-    m/s², braking gently after — completing first when the car is already out beside what it
-    passes (the likeliest to pass verification, tried alone first; few manoeuvres, since each is
+    full braking level, the creep, and completing the pass at the speed it has (at
+    :data:`PASS_PACE` or more, when that gets it there in time: :func:`_moves`) or gaining 1.5 m/s², braking gently after — completing
+    first when the car is already out beside what it passes (the likeliest to pass verification, tried alone first; few manoeuvres, since each is
     rolled out in half-second closed-loop segments)."""
     levels = sorted({min(settings.decels), max(settings.decels)}) if settings.decels else [brake_full]
     out = [Manoeuvre(d, e_goal=e_goal, s_return=s0,
@@ -176,13 +194,14 @@ def _returning(settings: FailSafeSettings, s0: float, v0: float, brake_full: flo
     d_min = math.sqrt(6.0 * 3.5 * 2.7 / math.tan(0.8 * settings.delta_max))  # a lane's width, wheelbase ~2.7 m
     out.append(Manoeuvre(levels[0], 1.0, s0 + d_min, e_goal, s0, d_min))
     if math.isfinite(s_past):
-        v = max(v0, 3.0)
+        v = max(v0, PASS_PACE)
         d_ret = v * math.sqrt(6.0 * 3.5 / (0.5 * settings.a_lat_max))  # a lane's width back
         start = max(s_past, s0)
         d_out = min(d_ret, max(0.6 * (start - s0), 0.5))  # out beside it before its rear
         brake = min(settings.clear_brakes) if settings.clear_brakes else levels[0]
         complete = [Manoeuvre(brake, a, start + d_ret, e_goal, start, d_ret, e_beside, s0, d_out)
-                    for a in sorted({0.0, max(settings.clear_accels, default=0.0)})]
+                    for a in sorted({0.0, max(settings.clear_accels, default=0.0)})
+                    if _moves(a, v0, start + d_ret - s0, settings.max_time, PASS_PACE)]
         out = complete + out if abs(e_beside - e_goal) > 0 and v0 > 1.0 else out + complete
     return out
 
