@@ -482,8 +482,7 @@ class LaneSet:
             t = np.clip(t, np.where(within == 0, -np.inf, 0.0), np.where(within == np.repeat(cnt, cnt) - 1, np.inf, 1.0))
             diff = rel - t[:, None] * d
             dist2 = np.where(l2 > 0, np.einsum("kj,kj->k", diff, diff), np.inf)
-            order = np.lexsort((dist2, rep))
-            first = order[np.concatenate([[True], rep[order][1:] != rep[order][:-1]])]
+            first = _first_min(dist2, cnt)
             kk, tt = k[first], t[first]
             s_out[lo:hi] = self.key[kk] + tt * (self.key[kk + 1] - self.key[kk]) - self.base[lane[lo:hi]]
             dk = d[first]
@@ -719,6 +718,17 @@ class Route(Polyline):
 
 
 _INTERVALS: "weakref.WeakKeyDictionary[Polyline, float]" = weakref.WeakKeyDictionary()
+
+
+def _first_min(values: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """Index into ``values`` of the smallest of each consecutive group of ``counts`` (each ≥ 1)
+    values, the first on ties; NaNs are passed over (a group of NaNs only: its first). Linear,
+    where sorting the groups (a lexsort) costs n log n."""
+    starts = np.cumsum(counts) - counts
+    least = np.fmin.reduceat(values, starts)
+    pos = np.where(values == np.repeat(least, counts), np.arange(len(values)), len(values))
+    first = np.minimum.reduceat(pos, starts)
+    return np.where(first == len(values), starts, first)
 
 
 def _max_interval(line: Polyline) -> float:
