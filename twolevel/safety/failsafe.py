@@ -184,8 +184,9 @@ def _returning(settings: FailSafeSettings, s0: float, v0: float, brake_full: flo
                s_past: float, e_beside: float) -> list[Manoeuvre]:
     """:func:`manoeuvres` for a car out of the route's lane (its ``back``): the gentlest and the
     full braking level, the creep, and completing the pass at the speed it has (at
-    :data:`PASS_PACE` or more, when that gets it there in time: :func:`_moves`) or gaining 1.5 m/s², braking gently after — completing
-    first when the car is already out beside what it passes (the likeliest to pass verification, tried alone first; few manoeuvres, since each is
+    :data:`PASS_PACE` or more, when that gets it there in time: :func:`_moves`) or gaining 1.5
+    m/s², braking gently after — completing first when the car is already out beside what it
+    passes (the likeliest to pass verification, tried alone first; few manoeuvres, since each is
     rolled out in half-second closed-loop segments)."""
     levels = sorted({min(settings.decels), max(settings.decels)}) if settings.decels else [brake_full]
     out = [Manoeuvre(d, e_goal=e_goal, s_return=s0,
