@@ -54,7 +54,7 @@ from twolevel.safety.network import CELL_LENGTH, CELL_TURN, LIGHT, MAP_SLACK, ST
 from twolevel.safety.polygons import OCTAGON_NORMALS, band_pieces, disc_hull_octagons, lane_point
 from twolevel.world.traffic import RED, TrafficState
 
-__all__ = ["Intervals", "Occupancy", "predict", "travel_max", "travel_min", "time_to_travel", "lane_of",
+__all__ = ["Intervals", "Occupancy", "ReachBounds", "reach_bounds", "predict", "travel_max", "travel_min", "time_to_travel", "lane_of",
            "kind_flags", "STOP_ZONE", "STANDING"]
 
 STOP_ZONE = 3.0
@@ -280,6 +280,45 @@ def kind_flags(assumptions: Assumptions, kinds: np.ndarray, name: str) -> np.nda
     return _bounds_table(assumptions)[np.asarray(kinds, dtype=int), _COLUMNS.index(name)] > 0
 
 
+@dataclass(frozen=True, eq=False)
+class ReachBounds:
+    """How far and how fast participants ``idx`` may go along their lanes under the assumptions
+    (what :func:`predict` bounds their front by): speed now ``v0`` [m/s], ``v_cap`` [m/s] =
+    max(v0, min(v_max, speed_factor · the largest limit on its lane tree)), ``a_max`` [m/s²] and
+    ``v_switch`` [m/s] of SPOT's engine model, their ``lane`` (−1: none) and ``s0`` [m] on it,
+    whether they may change lanes (``changes``) and their kinds' bounds ``col`` (P, 8)."""
+
+    v0: np.ndarray
+    v_cap: np.ndarray
+    a_max: np.ndarray
+    v_switch: np.ndarray
+    lane: np.ndarray
+    s0: np.ndarray
+    changes: np.ndarray
+    col: np.ndarray
+
+    def earliest(self, d: np.ndarray) -> np.ndarray:
+        """The earliest time [s] each could have travelled ``d`` (P,) [m] along its way
+        (:func:`time_to_travel`)."""
+        return time_to_travel(self.v0, self.v_cap, self.a_max, self.v_switch, d)
+
+
+def reach_bounds(net: Network, traffic: TrafficState, idx: np.ndarray, assumptions: Assumptions,
+                 kinds: np.ndarray) -> ReachBounds:
+    """The :class:`ReachBounds` of participants ``idx`` (P,) of ``traffic``; ``kinds`` (N,) their
+    kinds of road user. The one model of how fast others may come: the occupancy and the MPC's
+    gap acceptance (:mod:`twolevel.control.high_level.right_of_way`) both read it."""
+    idx = np.asarray(idx, dtype=int)
+    col = _bounds_table(assumptions)[np.asarray(kinds)[idx]]  # (P, 8)
+    changes = col[:, 5] > 0
+    v0 = np.maximum(traffic.v[idx].astype(float), 0.0)
+    lane, s0 = lane_of(net, traffic, idx)
+    li = np.maximum(lane, 0)
+    limit = np.where(changes, net.change.limit[li], net.keep.limit[li])
+    v_cap = np.maximum(v0, np.minimum(col[:, 0], col[:, 1] * limit))
+    return ReachBounds(v0, v_cap, col[:, 2], col[:, 3], lane, s0, changes, col)
+
+
 def predict(net: Network, traffic: TrafficState, t: float, intervals: Intervals, assumptions: Assumptions,
             kinds: np.ndarray, include: np.ndarray | None = None,
             roi: tuple[np.ndarray, np.ndarray] | None = None, hold: np.ndarray | None = None) -> Occupancy:
@@ -299,16 +338,12 @@ def predict(net: Network, traffic: TrafficState, t: float, intervals: Intervals,
         return _empty(intervals, idx, P, J)
     kind = np.asarray(kinds)[idx]
     table = tuple(assumptions.bounds(k) for k in range(3))
-    col = _bounds_table(assumptions)[kind]  # (P, 8)
-    v_max, factor, a_max, v_sw = col[:, 0], col[:, 1], col[:, 2], col[:, 3]
-    changes = col[:, 5] > 0
-    v0 = np.maximum(traffic.v[idx].astype(float), 0.0)
-
-    lane, s0 = lane_of(net, traffic, idx)
+    r = reach_bounds(net, traffic, idx, assumptions, kinds)
+    col, v0, v_cap, a_max, v_sw, lane, s0, changes = r.col, r.v0, r.v_cap, r.a_max, r.v_switch, r.lane, r.s0, r.changes
+    v_max, factor = col[:, 0], col[:, 1]
     on_lane = (col[:, 4] > 0) & (lane >= 0)
     li = np.maximum(lane, 0)
     per_tree = lambda name: np.where(changes, getattr(net.change, name)[li], getattr(net.keep, name)[li])  # noqa: E731
-    v_cap = np.maximum(v0, np.minimum(v_max, factor * per_tree("limit")))
     if hold is not None:
         v_cap = np.where(np.asarray(hold)[idx], v0, v_cap)
     stretch, shrink = per_tree("stretch"), per_tree("shrink")
