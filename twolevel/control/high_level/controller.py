@@ -45,6 +45,7 @@ from twolevel.control.high_level.linearisation import StepData, history_length, 
 from twolevel.control.high_level.problem import Assembled, StepRules, assemble
 from twolevel.control.high_level.robustness import plan_robustness
 from twolevel.control.high_level.rules import MpcRule, mpc_rules
+from twolevel.control.high_level.right_of_way import gap_rule
 from twolevel.control.high_level.settings import MPCSettings
 from twolevel.control.high_level.solvers import Attempt, solve_path
 from twolevel.control.high_level.template import TemplateCache, refresh, template_of
@@ -95,6 +96,7 @@ class HighLevelController:
         self.diagnostics: list[Diagnostic] = diags
         reads_all = set().union(*(r.reads for r in self.rules)) if self.rules else set()
         self.stop_rules = ("d_stop" in reads_all, bool({"light_red", "d_light"} & reads_all))
+        self.gap = gap_rule(rulesets)
         self.templates = TemplateCache(capacity=4)
         self.carry = Carry()
         self._pattern_cache = PatternCache(capacity=16)
@@ -146,7 +148,7 @@ class HighLevelController:
             u_prev = np.array([hist["delta"][-1], hist["a"][-1]])
         step = prepare_step(self.world, EgoState.of(ego).pose, t, snap.traffic, self.settings, self.params,
                             prev=prev, u_prev=u_prev, memory=memory, s_hint=self.carry.s_hint, about=about,
-                            stop_rules=self.stop_rules, passing=self.carry.passing)
+                            stop_rules=self.stop_rules, passing=self.carry.passing, gap=self.gap)
         names = set().union(*(r.reads for r in self.rules)) if self.rules else set()
         depth = max((r.depth for r in self.rules), default=0)
         P = history_length(hist, names, depth)

@@ -24,7 +24,7 @@ from twolevel.control.high_level.overtaking import oncoming_band
 from twolevel.control.high_level.guards import (Pass, RssTerminal, TerminalStop, drivable_band, rss_terminal,
                                                 stop_lines, terminal_stop)
 from twolevel.control.high_level.neighbours import NEIGHBOUR_SIGNALS, NeighbourConstants, neighbour_constants
-from twolevel.control.high_level.right_of_way import ZoneConstants, give_way_line, zone_constants
+from twolevel.control.high_level.right_of_way import GapRule, ZoneConstants, give_way_line, zone_constants
 from twolevel.control.high_level.reference import reference, reference_controls, wrap_to
 from twolevel.control.high_level.settings import MPCSettings
 from twolevel.control.high_level.steering import steering_bound, steering_reference, steering_weight
@@ -165,7 +165,7 @@ def prepare_step(
     world: World, x0: np.ndarray, t: float, traffic: TrafficState, settings: MPCSettings, params: BicycleParams,
     *, prev: PreviousPlan | None = None, u_prev: np.ndarray | None = None, memory: StopMemory | None = None,
     s_hint: float | None = None, about: str = "plan", stop_rules: tuple[bool, bool] = (False, False),
-    passing: Pass | None = None,
+    passing: Pass | None = None, gap: GapRule = GapRule(),
 ) -> StepData:
     """Everything known at time ``t`` [s] for ego state ``x0`` = (X, Y, ψ, v), over the
     look-ahead of ``settings``.
@@ -177,7 +177,8 @@ def prepare_step(
     plan's first). ``stop_rules`` = (a rule reads d_stop, a rule reads light_red/d_light): which
     lines the terminal can-still-stop condition guards, with ``settings.stop_decel`` [m/s²] and
     ``settings.stop_margin`` [m] before the line; ``settings.band``: bound the lateral offset to
-    the drivable band; ``settings.rss``: keep RSS's distance behind the vehicle ahead, or pass it
+    the drivable band; ``gap``: the gap the right-of-way rule asks for (the give-way line,
+    :mod:`~twolevel.control.high_level.right_of_way`); ``settings.rss``: keep RSS's distance behind the vehicle ahead, or pass it
     (``passing``: a pass under way, :class:`~twolevel.control.high_level.guards.Pass`). The speed
     is bounded by what the ego can see (:func:`sensing_bound`, the world's
     ``settings.v_sense``). ``memory``, ``s_hint``: see
@@ -238,7 +239,8 @@ def prepare_step(
     s_line = math.inf
     if any(stop_rules):
         s_line = float(stop_lines(hc, stop=stop_rules[0], light=stop_rules[1])[-1])
-    zones = zone_constants(world, hc, s0, H) if "priority" in world.participant_signals else None
+    zones = (zone_constants(world, hc, s0, H, traffic, float(x0[3]), gap)
+             if "priority" in world.participant_signals else None)
     s_line = min(s_line, give_way_line(zones))
     if route.v_des.size and route.v_des[-1] <= 1e-9:  # the route stops at its goal
         s_line = min(s_line, float(route.s[-1]) + stop_margin)

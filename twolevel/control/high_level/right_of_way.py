@@ -15,15 +15,24 @@ the horizon (k = 0..H):
   held; ``present`` +inf over the horizon. The encoder expands a rule's quantifier over them.
 
 **The give-way line.** The rules see one second ahead; a car coming up to a junction at speed
-cannot stop in that second. While a participant with priority is within ``r_near`` and could
-come, at the earliest under the world's assumptions about others (accelerating at their a_max up
-to their speed bound, from standstill too: what the safety layer's verifier checks an entry
-against; a crossing it refused halfway would end in its braking fail-safe, inside), sooner
-than the gap the ego needs from it (:data:`GAP_MARGIN`, :data:`GAP_SPEED`), or a slow vehicle
-ahead in the ego's lane leaves no room behind the area's exit (:data:`BLOCK_SPEED`,
-:data:`BLOCK_GAP`: the junction cannot be cleared), the terminal can-still-stop condition of
-:mod:`~twolevel.control.high_level.guards` keeps the ego able to stop :data:`RUN_UP` metres before
-the area's entry, as it does at a stop line; with nobody to give way to it does not apply.
+cannot stop in that second. While a participant with priority is within ``r_near`` and the ego
+may not yet go (:meth:`ZoneConstants.waiting`), or a slow vehicle ahead in the ego's lane leaves
+no room behind the area's exit (:data:`BLOCK_GAP`: the junction cannot be cleared), the
+terminal can-still-stop condition of :mod:`~twolevel.control.high_level.guards` keeps the ego
+able to stop :data:`RUN_UP` metres before the area's entry, as it does at a stop line; with
+nobody to give way to it does not apply. The ego may go when, for every participant with
+priority, both hold:
+
+* **the rule** — its constant-velocity ``t_reach`` is at least the gap the loaded rule asks for,
+  margin + d_exit / speed (:class:`GapRule`, read from the rule's own constants by
+  :func:`gap_rule`: the MILP and the line keep the same rule);
+* **safety** — its earliest arrival under the world's assumptions about others
+  (:func:`twolevel.safety.occupancy.reach_bounds`: accelerating at most as SPOT's engine model
+  allows, up to speed_factor × its lane tree's limit — the model the safety layer's verifier
+  predicts it with) is no sooner than the ego can be out of its way clearing as the verifier's
+  clearing fail-safe does (:data:`CLEAR_ACCEL` from its speed now, no margin: the worst case is
+  the margin). Once committed, the verifier keeps that fail-safe: the ego clears, it does not
+  stop inside.
 Units: m, s, m/s.
 """
 
@@ -31,19 +40,24 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Callable, Mapping
+from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from twolevel.safety.occupancy import time_to_travel
+from twolevel.safety.failsafe import FailSafeSettings
+from twolevel.safety.network import network_of
+from twolevel.safety.occupancy import reach_bounds, time_to_travel
 from twolevel.stl.analysis import PRESENT, participant_key, split_participant_key
+from twolevel.stl.ast import Abs, Arith, Compare, Neg, Node, Num, ParticipantSignal
+from twolevel.stl.typecheck import RuleSet
 from twolevel.world.provided import PARTICIPANT_ABSENT
 from twolevel.world.right_of_way import (REACH_DISTANCE, ZONE_PARTICIPANT_SIGNALS, next_area,
                                          participant_zone_signals)
 from twolevel.world.signals import HorizonConstants
+from twolevel.world.traffic import TrafficState
 from twolevel.world.world import World
 
-__all__ = ["RUN_UP", "GAP_MARGIN", "GAP_SPEED", "BLOCK_SPEED", "BLOCK_GAP", "ZoneConstants", "zone_constants",
+__all__ = ["RUN_UP", "CLEAR_ACCEL", "BLOCK_GAP", "GapRule", "gap_rule", "ZoneConstants", "zone_constants",
            "give_way_line", "zone_signals_over", "MPC_ZONE_PATTERNS"]
 
 RUN_UP = 1.0
@@ -51,12 +65,67 @@ RUN_UP = 1.0
 into the area accelerating, as rules/right_of_way.stl allows, and a stop sign's line (the area
 starts a metre or two past it) is within its stop zone."""
 
-GAP_MARGIN, GAP_SPEED = 1.5, 2.5
-"""[s], [m/s] The gap the give-way line assumes the rules ask for: rules/right_of_way.stl's
-t_margin and v_go (a rule asking for more is still kept over the fine part; one asking for less
-waits longer than it must)."""
-BLOCK_SPEED = 2.5
-"""[m/s] A vehicle ahead slower than this beyond a conflict area may block its exit."""
+CLEAR_ACCEL = max(FailSafeSettings().clear_accels)
+"""[m/s²] The acceleration the ego is taken to clear a conflict area with: the safety layer's
+clearing fail-safe's (:class:`~twolevel.safety.failsafe.FailSafeSettings`)."""
+
+
+@dataclass(frozen=True)
+class GapRule:
+    """The gap a right-of-way rule asks of the ego before a participant with priority arrives,
+    ``t_reach(o) >= margin + d_exit(o) / speed``: ``margin`` [s], ``speed`` [m/s] (also the
+    least speed inside the area below which a vehicle ahead may block the exit). The defaults
+    are rules/right_of_way.stl's t_margin and v_go."""
+
+    margin: float = 1.5
+    speed: float = 4.0
+
+    def needs(self, d_exit: np.ndarray) -> np.ndarray:
+        """The gap [s] the ego needs with its rear ``d_exit`` [m] from leaving o's way."""
+        return self.margin + np.maximum(d_exit, 0.0) / self.speed
+
+
+def _value(term: Node, d: float) -> float:
+    """A term of numbers and ``d_exit(o)`` at d_exit = ``d`` [m] (``ValueError``: it reads more)."""
+    if isinstance(term, Num):
+        return float(term.value)
+    if isinstance(term, ParticipantSignal) and term.name == "d_exit":
+        return d
+    if isinstance(term, Neg):
+        return -_value(term.operand, d)
+    if isinstance(term, Abs):
+        return abs(_value(term.operand, d))
+    if isinstance(term, Arith):
+        a, b = _value(term.left, d), _value(term.right, d)
+        return {"+": a + b, "-": a - b, "*": a * b, "/": a / b if b else math.inf}[term.op]
+    raise ValueError(term)
+
+
+def gap_rule(rulesets: Sequence[RuleSet]) -> GapRule:
+    """The :class:`GapRule` of the first predicate ``t_reach(o) >= g(d_exit(o))`` (or
+    ``g(...) <= t_reach(o)``) among the rules of ``rulesets``, g affine in d_exit with its
+    constants bound (a scenario's override of t_margin or v_go included); the defaults when no
+    rule has one."""
+    for rs in rulesets:
+        for r in rs.rules:
+            for node in rs.formula(r.name).walk():
+                if not isinstance(node, Compare):
+                    continue
+                if node.op in (">=", ">") and node.left == ParticipantSignal("t_reach", getattr(node.left, "var", "")):
+                    g = node.right
+                elif node.op in ("<=", "<") and node.right == ParticipantSignal("t_reach", getattr(node.right, "var", "")):
+                    g = node.left
+                else:
+                    continue
+                try:
+                    m, slope, far = _value(g, 0.0), _value(g, 1.0) - _value(g, 0.0), _value(g, 100.0)
+                except (ValueError, ZeroDivisionError):
+                    continue
+                if slope > 0 and math.isclose(far, m + 100.0 * slope, rel_tol=1e-9, abs_tol=1e-9):
+                    return GapRule(m, 1.0 / slope)
+    return GapRule()
+
+
 BLOCK_GAP = 2.0
 """[m] The room the ego needs behind such a vehicle once it has left the area."""
 
@@ -71,8 +140,9 @@ class ZoneConstants:
     (n,) within r_near and their ``values`` (n, H+1) over the fine part: ``t_reach``/``t_clear``
     [s], ``priority``, ``d_exit`` [m] (with the ego held at s0; the MPC makes it c − s_k);
     ``worst_reach`` (n,) [s]: when each could reach the area at the earliest under the world's
-    assumptions (:func:`twolevel.safety.occupancy.time_to_travel`, the verifier's); ``blocked``:
-    the exit is."""
+    assumptions (:func:`twolevel.safety.occupancy.reach_bounds`, the verifier's model);
+    ``clear_time`` (n,) [s]: when the ego, clearing at :data:`CLEAR_ACCEL` from its speed now, is
+    out of each one's way; ``gap``: the rule's :class:`GapRule`; ``blocked``: the exit is."""
 
     s_in: float = math.inf
     s_out: float = -math.inf
@@ -82,27 +152,33 @@ class ZoneConstants:
     values: Mapping[str, np.ndarray] = field(default_factory=dict)
     blocked: bool = False
     worst_reach: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    clear_time: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    gap: GapRule = GapRule()
 
     def waiting(self) -> bool:
-        """Whether the ego waits before the area: someone with priority comes sooner than the
-        gap the ego needs from it now (:data:`GAP_MARGIN` + d_exit / :data:`GAP_SPEED`), or the
-        exit is ``blocked``."""
-        p, d = self.values.get("priority"), self.values.get("d_exit")
+        """Whether the ego waits before the area: the exit is ``blocked``, or someone with
+        priority comes sooner than the rule's gap at its speed now (``t_reach`` <
+        :meth:`GapRule.needs`) or, at its earliest under the assumptions, before the ego could
+        be out of its way (``worst_reach`` < ``clear_time``)."""
+        p, d, t = self.values.get("priority"), self.values.get("d_exit"), self.values.get("t_reach")
         if self.blocked:
             return True
         if p is None or not len(p):
             return False
         with np.errstate(invalid="ignore"):
-            short = self.worst_reach < GAP_MARGIN + np.maximum(d[:, 0], 0.0) / GAP_SPEED
+            short = (t[:, 0] < self.gap.needs(d[:, 0])) | (self.worst_reach < self.clear_time)
         return bool(np.any((p[:, 0] > 0.5) & short))
 
 
-def zone_constants(world: World, hc: HorizonConstants, s0: float, H: int) -> ZoneConstants:
-    """The :class:`ZoneConstants` at route position ``s0`` [m] over the first H steps of ``hc``."""
+def zone_constants(world: World, hc: HorizonConstants, s0: float, H: int, traffic: TrafficState,
+                   v0: float = 0.0, gap: GapRule = GapRule()) -> ZoneConstants:
+    """The :class:`ZoneConstants` at route position ``s0`` [m] and speed ``v0`` [m/s] over the
+    first H steps of ``hc``; ``traffic``: the participants now (their lanes, for the worst case);
+    ``gap``: the rule's."""
     z = world.zones
     k = int(next_area(z, np.array(s0), float(world.ego.length), world.settings.r_near))
     if k < 0:
-        return ZoneConstants(length=float(world.ego.length))
+        return ZoneConstants(length=float(world.ego.length), gap=gap)
     n = len(hc.index)
     ids = tuple(world.parts.ids[i] for i in hc.index)
     f = slice(0, H + 1)
@@ -111,19 +187,19 @@ def zone_constants(world: World, hc: HorizonConstants, s0: float, H: int) -> Zon
     vals = participant_zone_signals(world, np.full(H + 1, s0), hc.t[f], other, hc.length,
                                     np.ones((H + 1, n), dtype=bool)) if n else {}
     L = float(world.ego.length)
-    worst = np.zeros(0)
+    worst, clear = np.zeros(0), np.zeros(0)
     if n:
-        b = world.parts.bounds[hc.index]
-        top = float(world.limits.value.max(initial=float(world.route.limit_v.max())))  # any lane's limit
-        v_cap = np.minimum(b[:, 0], b[:, 1] * top)
-        # the verifier's reach (no power limit): accelerating at a_max up to the cap, from v now
-        worst = time_to_travel(hc.v, np.maximum(v_cap, hc.v), b[:, 2], np.full(n, np.inf), vals[REACH_DISTANCE][0])
-    # the exit is blocked when the vehicle ahead in the ego's lane (slower than a crossing, v_ahead
-    # held) would leave no room for the ego behind the area's exit
+        reach = reach_bounds(network_of(world), traffic, np.asarray(hc.index), world.assumptions, world.parts.user)
+        worst = reach.earliest(vals[REACH_DISTANCE][0])
+        d_exit = np.maximum(vals["d_exit"][0], 0.0)
+        clear = time_to_travel(np.full(n, max(v0, 0.0)), np.full(n, np.inf), np.full(n, CLEAR_ACCEL),
+                               np.full(n, np.inf), d_exit)
+    # the exit is blocked when the vehicle ahead in the ego's lane (slower than the rule's least
+    # speed inside, v_ahead held) would leave no room for the ego behind the area's exit
     room = float(hc.s_ahead[min(H, len(hc.s_ahead) - 1)]) - hc.ahead_offset - BLOCK_GAP
-    blocked = hc.ahead >= 0 and hc.v_ahead < BLOCK_SPEED and room < float(z.area_s1[k]) + L / 2
+    blocked = hc.ahead >= 0 and hc.v_ahead < gap.speed and room < float(z.area_s1[k]) + L / 2
     return ZoneConstants(float(z.area_s0[k]), float(z.area_s1[k]), s0, L, ids,
-                         {name: np.asarray(v).T for name, v in vals.items()}, bool(blocked), worst)
+                         {name: np.asarray(v).T for name, v in vals.items()}, bool(blocked), worst, clear, gap)
 
 
 def give_way_line(zc: ZoneConstants | None) -> float:

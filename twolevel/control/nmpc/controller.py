@@ -59,7 +59,7 @@ import numpy as np
 
 from twolevel.control.codes import MIL515, MIL530
 from twolevel.control.high_level.guards import stop_lines
-from twolevel.control.high_level.right_of_way import MPC_ZONE_PATTERNS, give_way_line
+from twolevel.control.high_level.right_of_way import MPC_ZONE_PATTERNS, gap_rule, give_way_line
 from twolevel.control.high_level.linearisation import StepData, prepare_step, sensing_bound
 from twolevel.control.high_level.settings import MPCSettings
 from twolevel.control.high_level.steering import steering_reference
@@ -137,6 +137,7 @@ class NmpcController:
         self.diagnostics: list[Diagnostic] = []
         self.speed = self.stop = self.light = self.give_way = False
         self.d_collision: float | None = None
+        self.gap = gap_rule(rulesets)
         for rs in rulesets:
             for r in rs.rules:
                 f = rs.formula(r.name)
@@ -202,7 +203,7 @@ class NmpcController:
         elif self.previous is not None:
             u_prev = self.problem.unpack_w(self.previous.solution.w)[1][0]
         return prepare_step(self.world, x0[:4], t, snap.traffic, st, self.params, u_prev=u_prev, memory=memory,
-                            s_hint=self._s_hint)
+                            s_hint=self._s_hint, gap=self.gap)
 
     def _x0(self, ego: EgoState) -> np.ndarray:
         """The model's state now: the pose (kinematic), the detailed state (four-wheel), or
