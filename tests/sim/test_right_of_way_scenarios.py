@@ -1,4 +1,4 @@
-"""The right-of-way scenarios (scenarios/traffic/: yield_priority_road, left_turn_stream,
+"""The right-of-way scenarios (scenarios/traffic/: yield_priority_road, left_turn_stream, right_turn_stream,
 four_way_stop_crossing, blocked_exit) in the closed loop with the real controller, judged against
 their own ``expect:`` (the offline monitor on the trace: give_way, clear_junction), and read
 back from the trace: the ego waited before the conflict area while a priority car came, went in a
@@ -97,3 +97,14 @@ def test_blocked_exit_is_not_entered(tmp_path: Path) -> None:
     inside, waiting = _check_gaps(c)
     # it stood before the junction while the delivery car stood beyond it (until 12 s)
     assert waiting.sum() >= 10 and c["t"][np.flatnonzero(inside)[0]] > 12.0
+
+
+@pytest.mark.slow
+def test_right_turn_merges_behind_the_stream_from_the_left(tmp_path: Path) -> None:
+    c = _run(tmp_path, "right_turn_stream")
+    inside, waiting = _check_gaps(c)
+    assert waiting.sum() >= 10
+    first_in = int(np.flatnonzero(inside)[0])
+    assert np.flatnonzero(waiting)[-1] < first_in
+    # it turned in behind the last car of the platoon (at the junction about 8 s in)
+    assert c["t"][first_in] > 8.0 and c["t_reach[from_left_3]"][first_in] == np.inf
