@@ -108,3 +108,20 @@ def test_right_turn_merges_behind_the_stream_from_the_left(tmp_path: Path) -> No
     assert np.flatnonzero(waiting)[-1] < first_in
     # it turned in behind the last car of the platoon (at the junction about 8 s in)
     assert c["t"][first_in] > 8.0 and c["t_reach[from_left_3]"][first_in] == np.inf
+
+
+@pytest.mark.slow
+def test_the_nmpc_baseline_waits_in_its_lane(tmp_path: Path) -> None:
+    """The NMPC baseline at the yield line: its reference used to run on past the give-way line,
+    and with no lateral band the plan slid sideways along the line (7 m off the route, standing
+    across the verge); the reference now stops at the line, as at a stop line."""
+    path = TRAFFIC / "yield_priority_road.yaml"
+    summary, diags = simulate_scenario(str(path), str(tmp_path / "nmpc"), frames=False, ttr_every=0,
+                                       controller="nmpc", duration=15.0)
+    assert summary is not None and summary.status == "complete", [d.message for d in diags]
+    trace, _ = read_trace(str(Path(summary.run_dir) / "trace.csv"))
+    assert trace is not None
+    e, d_zone, v = (np.asarray(trace.columns[k], float) for k in ("e", "d_zone", "v"))
+    before = d_zone > 0
+    assert ((v < 0.3) & before).sum() >= 10  # it waited at the line
+    assert np.max(np.abs(e[before])) < 0.3

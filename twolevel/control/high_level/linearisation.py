@@ -24,7 +24,7 @@ from twolevel.control.high_level.overtaking import oncoming_band
 from twolevel.control.high_level.guards import (Pass, RssTerminal, TerminalStop, drivable_band, rss_terminal,
                                                 stop_lines, terminal_stop)
 from twolevel.control.high_level.neighbours import NEIGHBOUR_SIGNALS, NeighbourConstants, neighbour_constants
-from twolevel.control.high_level.right_of_way import GapRule, ZoneConstants, give_way_line, zone_constants
+from twolevel.control.high_level.right_of_way import GapRule, ZoneConstants, give_way_line
 from twolevel.control.high_level.reference import reference, reference_controls, wrap_to
 from twolevel.control.high_level.settings import MPCSettings
 from twolevel.control.high_level.steering import steering_bound, steering_reference, steering_weight
@@ -192,7 +192,7 @@ def prepare_step(
     ws = world.settings
     x0 = np.asarray(x0, dtype=float)[:4].copy()
     ref = reference(world, x0, t, traffic, settings, params, memory=memory, s_hint=s_hint, stop_rules=stop_rules,
-                    passing=passing)
+                    passing=passing, gap=gap if "priority" in world.participant_signals else None)
     s0, s_ref, v_ref, omega, hc = ref.s0, ref.s_ref, ref.v_ref, ref.omega, ref.hc
     if about == "brake":  # a braking rollout with the wheel straight (to standstill, no reversing)
         us_bar = np.zeros((N, 2))
@@ -239,8 +239,7 @@ def prepare_step(
     s_line = math.inf
     if any(stop_rules):
         s_line = float(stop_lines(hc, stop=stop_rules[0], light=stop_rules[1])[-1])
-    zones = (zone_constants(world, hc, s0, H, traffic, float(x0[3]), gap)
-             if "priority" in world.participant_signals else None)
+    zones = ref.zones
     s_line = min(s_line, give_way_line(zones))
     if route.v_des.size and route.v_des[-1] <= 1e-9:  # the route stops at its goal
         s_line = min(s_line, float(route.s[-1]) + stop_margin)

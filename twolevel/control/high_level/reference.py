@@ -22,6 +22,7 @@ from twolevel.control.high_level.guards import (BESIDE_FROM, LATERAL_MARGIN, Fro
 from twolevel.control.high_level.neighbours import left_leader
 from twolevel.control.high_level.overtaking import (lateral_due, lateral_share, oncoming_band, oncoming_free, out_of_lane,
                                                     waiting_room)
+from twolevel.control.high_level.right_of_way import GapRule, ZoneConstants, give_way_line, zone_constants
 from twolevel.control.high_level.settings import MPCSettings
 from twolevel.control.high_level.steering import steering_reference
 from twolevel.models.params import BicycleParams
@@ -47,7 +48,8 @@ class Reference:
     (:func:`twolevel.control.high_level.guards.free_sides`); ``oncoming``: the left pass goes over
     the oncoming lane, and the lateral band takes it in
     (:mod:`twolevel.control.high_level.overtaking`), ``early``: the share of the way beside it due
-    at the last fine step (None: in proportion to the time)."""
+    at the last fine step (None: in proportion to the time); ``zones``: the next conflict area's
+    constants when right of way is guarded (:mod:`twolevel.control.high_level.right_of_way`)."""
 
     s0: float
     e0: float
@@ -64,6 +66,7 @@ class Reference:
     due: float = 0.0
     oncoming: bool = False
     early: float | None = None
+    zones: ZoneConstants | None = None
 
 
 def wrap_to(angle: np.ndarray | float, ref: float) -> np.ndarray:
@@ -130,12 +133,16 @@ def _reference_to(route: Route, s0: float, v0: float, steps: Sequence[float], s_
 
 def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, settings: MPCSettings,
               params: BicycleParams, *, memory: StopMemory | None = None, s_hint: float | None = None,
-              stop_rules: tuple[bool, bool] = (False, False), passing: Pass | None = None) -> Reference:
+              stop_rules: tuple[bool, bool] = (False, False), passing: Pass | None = None,
+              gap: GapRule | None = None) -> Reference:
     """The reference at time ``t`` [s] for ego state ``x0`` = (X, Y, ψ, v) over the look-ahead of
     ``settings``: the ego is projected near ``s_hint`` [m] when given (else onto the whole
     route); ``stop_rules`` = (a rule reads d_stop, a rule reads light_red/d_light) says which
     lines the reference stops before (at ``settings.stop_decel``, ``settings.stop_margin``
-    before the line). With ``settings.rss``, when the ego may not pass the vehicle ahead sensed
+    before the line); with ``gap`` (the right-of-way rule's, None: not guarded) it stops before
+    the give-way line as well, while that holds (a reference that runs on past it pulls the plan
+    along: the NMPC baseline, which has no lateral band, slid sideways along the line off the
+    road). With ``settings.rss``, when the ego may not pass the vehicle ahead sensed
     in its lane (:func:`~twolevel.control.high_level.guards.free_sides`, judged where the desired
     speeds would take it, beside it from :data:`~twolevel.control.high_level.guards.BESIDE_FROM`
     on, or, ``passing`` it already, from the pass's due time on its side; while it passes, the
@@ -168,6 +175,12 @@ def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, set
         s_near = float(min(lines[0], lines[-1]))
         if s0 + d_brake <= s_near + 1e-6:
             s_end = min(s_end, max(s_near - settings.stop_margin, s0))
+    zones = None
+    if gap is not None:
+        zones = zone_constants(world, hc, s0, settings.H, traffic, float(x0[3]), gap)
+        s_give = give_way_line(zones)
+        if s0 + d_brake <= s_give + 1e-6:
+            s_end = min(s_end, max(s_give - settings.stop_margin, s0))
     follow, sides, lateral, lane, oncoming, early = None, (False, False), 0.0, 0.0, False, None
     ticks = np.asarray(settings.ticks)
     times = dt * ticks
@@ -216,7 +229,7 @@ def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, set
     head = x0[2] + np.concatenate([[0.0], np.cumsum(wrap_to(np.diff(head), 0.0))])
     omega = np.column_stack([pts[1:], head[1:], v_ref[1:]])
     return Reference(s0, float(e_arr[0]), s_ref, v_ref, omega, hc, d_brake, v_brake, front, sides, lateral, beside,
-                     due, oncoming, early)
+                     due, oncoming, early, zones)
 
 
 def _over_oncoming(world: World, hc: HorizonConstants, front: Front, sides: tuple[bool, bool], *, lateral: float,
