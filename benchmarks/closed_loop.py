@@ -37,7 +37,8 @@ from twolevel.verdict.judge import judge_run, recorded_ride
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ("traffic_rules", "safety", "scalability", "comparison")
-RIGHT_OF_WAY = ("yield_priority_road", "left_turn_stream", "four_way_stop_crossing", "blocked_exit", "right_turn_stream")
+RIGHT_OF_WAY = ("yield_priority_road", "left_turn_stream", "four_way_stop_crossing", "blocked_exit", "right_turn_stream",
+                "merge_cyclist")
 """The right-of-way scenarios (scenarios/traffic/), part of the suite."""
 SUITE = tuple(sorted(p.stem for p in (ROOT / "scenarios" / "everyday").glob("*.yaml"))) + RIGHT_OF_WAY
 #: Before the safety layer (main at fb74f82, the MPC and the NMPC with the paper's low level):
