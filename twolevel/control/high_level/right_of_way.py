@@ -127,7 +127,8 @@ def gap_rule(rulesets: Sequence[RuleSet]) -> GapRule:
 
 
 BLOCK_GAP = 2.0
-"""[m] The room the ego needs behind such a vehicle once it has left the area."""
+"""[m] The room the ego needs, once it has left the area, behind a vehicle ahead slower than the
+rule's least speed inside (:attr:`GapRule.speed`)."""
 
 MPC_ZONE_PATTERNS = frozenset(participant_key(n, "*") for n in ZONE_PARTICIPANT_SIGNALS)
 """The participant signals the MPC predicts (as the patterns a rule's reads name them)."""
