@@ -14,8 +14,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from twolevel.control.high_level.guards import front_of
-from twolevel.control.high_level.overtaking import oncoming_band, oncoming_free, out_of_lane
+from twolevel.control.high_level.guards import Front, front_of
+from twolevel.control.high_level.overtaking import (oncoming_band, oncoming_free, out_of_lane, room_to_pull_out,
+                                                    waiting_room)
+from twolevel.models.params import BicycleParams
 from twolevel.safety.failsafe import return_path
 from twolevel.sim.engine import simulate_scenario
 from twolevel.verdict.judge import judge_run
@@ -124,3 +126,45 @@ def test_the_ego_follows_a_tractor_through_a_no_overtaking_zone(tmp_path: Path) 
     xy, v = _simulate(tmp_path, "overtake_tractor_zone")  # the goal (in the zone) is reached: judged
     w = load_world(EVERYDAY / "overtake_tractor_zone.yaml")
     assert (xy[:, 1] + w.ego.width / 2 < 0.05).all()  # never over the centre line
+
+
+def _front(w, s: float, v: float, length: float = 4.22, width: float = 1.8) -> Front:
+    """A vehicle in the ego's lane at route position ``s`` [m] driving at ``v`` [m/s]."""
+    return Front(0, s + v * 0.5 * np.arange(41), v, 0.0, (w.ego.length + length) / 2, width)
+
+
+def test_the_waiting_room_is_judged_from_where_the_ego_waits() -> None:
+    """Behind a stalled car the ego keeps the room to pull out from however far back it still is
+    (it used to appear only ~30 m before it, when a pass from rest *at the ego's position* first
+    fitted the sensing range, and the ego braked at 7.7 m/s² for it)."""
+    w = load_world(EVERYDAY / "overtake_wait_oncoming.yaml")
+    p = BicycleParams()
+    f = _front(w, 70.0, 0.0)
+    rooms = [waiting_room(w, p, f, s0, 0.0, 2.6) for s0 in (0.0, 20.0, 40.0, 50.0)]
+    assert rooms[0] > 10.0 and rooms == pytest.approx([rooms[0]] * 4)
+
+
+def test_a_tractor_is_waited_behind_with_room_when_the_sight_allows_its_pass() -> None:
+    """Behind a tractor at 3 m/s the pass is judged at its pace: 500 m of sight allow it (room to
+    pull out kept), 400 m do not (the unseen car at the speed bound is too near; no room)."""
+    w = load_world(EVERYDAY / "overtake_tractor_oncoming.yaml")
+    p = BicycleParams()
+    f = _front(w, 100.0, 3.0, 5.0, 2.4)
+    assert w.settings.sensor_range == 500.0 and waiting_room(w, p, f, 60.0, 0.0, 2.6) > 10.0
+    short = dataclasses.replace(w, settings=dataclasses.replace(w.settings, sensor_range=400.0))
+    assert waiting_room(short, p, f, 60.0, 0.0, 2.6) == 0.0
+
+
+@settings(max_examples=60, deadline=None)
+@given(gap=st.floats(0.0, 40.0), v0=st.floats(0.0, 8.0), v_front=st.floats(0.0, 5.0))
+def test_a_pass_begins_only_with_room_to_pull_out(gap: float, v0: float, v_front: float) -> None:
+    """room_to_pull_out: true exactly when the lane change out fits into the gap less D_safe
+    (the front's own travel not counted: it may brake); more room never hurts."""
+    w = load_world(EVERYDAY / "overtake_wait_oncoming.yaml")
+    p = BicycleParams()
+    f = _front(w, 100.0, v_front)
+    s0 = 100.0 - f.offset - w.settings.D_safe - gap
+    ok = room_to_pull_out(w, p, f, s0, v0, 3.4)
+    assert room_to_pull_out(w, p, f, s0 - 5.0, v0, 3.4) or not ok
+    assert not room_to_pull_out(w, p, f, s0, v0, 3.4) if gap < 5.0 else True  # no lane change is that short
+    assert room_to_pull_out(w, p, f, 100.0 - f.offset - w.settings.D_safe - 40.0, 0.0, 3.4)

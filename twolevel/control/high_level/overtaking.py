@@ -48,7 +48,7 @@ from twolevel.world.signals import HorizonConstants
 from twolevel.world.world import World
 
 __all__ = ["oncoming_band", "lateral_due", "lateral_share", "pass_lane", "pass_time", "oncoming_free",
-           "sight_suffices", "waiting_room", "out_of_lane", "OUT_OF_LANE_MARGIN", "LANE_CHANGE_TIME"]
+           "sight_suffices", "waiting_room", "room_to_pull_out", "out_of_lane", "OUT_OF_LANE_MARGIN", "LANE_CHANGE_TIME"]
 
 LANE_CHANGE_TIME = 2.0
 """[s] The time a lane change back into the route's lane takes (as :data:`BESIDE_FROM` allows for
@@ -128,11 +128,22 @@ def lateral_due(world: World, params: BicycleParams, v0: float, shift: float) ->
     curvature keeps within 80 % of the steering limit and, at v0, the comfort lateral
     acceleration. From standstill a lane change needs room and time the 2 s of a pass at speed
     do not give."""
-    shift = abs(shift)
-    length = max(_pull_out(params, shift), v0 * math.sqrt(6.0 * shift / world.settings.comfort.lat_accel))
+    length = _lane_change_length(world, params, v0, shift)
     a = world.settings.comfort.accel
     t = (-v0 + math.sqrt(v0 * v0 + 2.0 * a * length)) / a
     return max(BESIDE_FROM, t)
+
+
+def room_to_pull_out(world: World, params: BicycleParams, front: Front, s0: float, v0: float, shift: float) -> bool:
+    """Whether the ego at route position ``s0`` [m] and speed ``v0`` [m/s] is far enough behind
+    ``front`` to begin a pass over the oncoming lane now: the lane change ``shift`` [m] out of its
+    lane (:func:`_lane_change_length`, as :func:`lateral_due` plans it) fits into the gap to the front's rear less D_safe. The
+    front's own travel is not counted: the safety layer assumes it may brake (only not speed up)
+    while it is passed, so a pull-out that needs it to drive on cannot be verified. Closer, the
+    ego would be half out of its lane behind the vehicle, where no fail-safe verifies (it can
+    neither steer back while it brakes nor get out past a front that brakes), so it keeps to its
+    waiting room (:func:`waiting_room`) first."""
+    return _lane_change_length(world, params, v0, shift) <= float(front.s[0]) - front.offset - s0 - world.settings.D_safe
 
 
 def pass_time(world: World, front: Front, s0: float, v0: float) -> tuple[float, float, float]:
@@ -196,14 +207,26 @@ def waiting_room(world: World, params: BicycleParams, front: Front, s0: float, e
     over the oncoming lane but the oncoming traffic does not let it now: the length of a lane
     change from rest to beside it (:func:`lateral_due`'s), so that it can pull out when the gap
     comes; 0 where no pass over the oncoming lane could be taken (the lane is not open beside
-    it, or the sensing range could never show a gap long enough)."""
+    it, or the sensing range could never show a gap long enough from where it would wait: the
+    pass is judged from there at the front's speed — from rest behind a standing vehicle, at a
+    tractor's pace behind one —, not from ``s0``: the ego may still be far back, and a room that
+    came and went with the ego's own position would make it surge and brake behind the vehicle)."""
     s_at = front.s[0] + np.array([-front.offset, 0.0, front.offset])
     if not oncoming_band(world, s_at)[2].all():
         return 0.0
-    T, travel, v_pass = pass_time(world, front, s0, 0.0)
-    if not (math.isfinite(T) and sight_suffices(world, s0, T, travel, v_pass)):
+    room = WAIT_ROOM_FACTOR * _pull_out(params, max(front.e + lateral, out_of_lane(world, s0)) - e0)
+    s_wait = float(front.s[0]) - front.offset - world.settings.D_safe - room
+    T, travel, v_pass = pass_time(world, front, s_wait, max(front.v, 0.0))
+    if not (math.isfinite(T) and sight_suffices(world, s_wait, T, travel, v_pass)):
         return 0.0
-    return WAIT_ROOM_FACTOR * _pull_out(params, max(front.e + lateral, out_of_lane(world, s0)) - e0)
+    return room
+
+
+def _lane_change_length(world: World, params: BicycleParams, v0: float, shift: float) -> float:
+    """[m] The length of a smooth lane change (3u² − 2u³) ``shift`` [m] wide begun at ``v0``
+    [m/s]: within 80 % of the steering limit (:func:`_pull_out`) and, at v0, the comfort lateral
+    acceleration."""
+    return max(_pull_out(params, shift), v0 * math.sqrt(6.0 * abs(shift) / world.settings.comfort.lat_accel))
 
 
 def _pull_out(params: BicycleParams, shift: float) -> float:

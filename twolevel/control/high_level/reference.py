@@ -21,7 +21,7 @@ from twolevel.control.high_level.guards import (BESIDE_FROM, LATERAL_MARGIN, Fro
                                                 drivable_band, free_sides, front_of, stop_lines)
 from twolevel.control.high_level.neighbours import left_leader
 from twolevel.control.high_level.overtaking import (lateral_due, lateral_share, oncoming_band, oncoming_free, out_of_lane,
-                                                    waiting_room)
+                                                    room_to_pull_out, waiting_room)
 from twolevel.control.high_level.right_of_way import GapRule, ZoneConstants, give_way_line, zone_constants
 from twolevel.control.high_level.settings import MPCSettings
 from twolevel.control.high_level.steering import steering_reference
@@ -201,6 +201,9 @@ def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, set
             beside_o = beside_steps(times, due_o)
             sides_o, oncoming = _over_oncoming(world, hc, front, sides, lateral=lateral_o, s0=s0, v0=float(x0[3]),
                                                s=s_ref[beside_o], v=v_ref[beside_o], t=times[beside_o])
+            if oncoming and passing is None:  # a new pass: only with room to pull out behind the vehicle
+                oncoming = room_to_pull_out(world, params, front, s0, float(x0[3]),
+                                            front.e + lateral_o - float(e_arr[0]))
             if oncoming:
                 sides, due, beside, lateral = sides_o, due_o, beside_o, lateral_o
                 early = lateral_share(world, float(x0[3]), due, float(times[settings.H]))
