@@ -17,6 +17,10 @@ oncoming lane:
   return in front of it: from its speed now, accelerating at the comfort acceleration up to the
   desired speed, until its rear is the vehicle's RSS distance (as a follower of the ego, the
   others' response) plus D_safe ahead of its front, plus the time of the lane change back.
+* :func:`waiting_room`, :func:`room_to_pull_out` — where the ego **waits** behind the vehicle
+  while the oncoming lane is not free (room to pull out from, judged from the waiting spot at the
+  vehicle's pace), and whether a new pass may begin from where it is (the lane change out fits
+  before the vehicle's rear).
 * :func:`oncoming_free` — the **gap acceptance**: every vehicle sensed in the oncoming lane ahead
   must be farther than the ego travels in that time, plus what it travels (its speed, against the
   route) in that time, plus RSS's safe distance between cars driving towards each other
@@ -48,7 +52,8 @@ from twolevel.world.signals import HorizonConstants
 from twolevel.world.world import World
 
 __all__ = ["oncoming_band", "lateral_due", "lateral_share", "pass_lane", "pass_time", "oncoming_free",
-           "sight_suffices", "waiting_room", "room_to_pull_out", "out_of_lane", "OUT_OF_LANE_MARGIN", "LANE_CHANGE_TIME"]
+           "sight_suffices", "waiting_room", "room_to_pull_out", "out_of_lane", "OUT_OF_LANE_MARGIN",
+           "LANE_CHANGE_TIME"]
 
 LANE_CHANGE_TIME = 2.0
 """[s] The time a lane change back into the route's lane takes (as :data:`BESIDE_FROM` allows for
@@ -137,13 +142,14 @@ def lateral_due(world: World, params: BicycleParams, v0: float, shift: float) ->
 def room_to_pull_out(world: World, params: BicycleParams, front: Front, s0: float, v0: float, shift: float) -> bool:
     """Whether the ego at route position ``s0`` [m] and speed ``v0`` [m/s] is far enough behind
     ``front`` to begin a pass over the oncoming lane now: the lane change ``shift`` [m] out of its
-    lane (:func:`_lane_change_length`, as :func:`lateral_due` plans it) fits into the gap to the front's rear less D_safe. The
-    front's own travel is not counted: the safety layer assumes it may brake (only not speed up)
-    while it is passed, so a pull-out that needs it to drive on cannot be verified. Closer, the
-    ego would be half out of its lane behind the vehicle, where no fail-safe verifies (it can
-    neither steer back while it brakes nor get out past a front that brakes), so it keeps to its
-    waiting room (:func:`waiting_room`) first."""
-    return _lane_change_length(world, params, v0, shift) <= float(front.s[0]) - front.offset - s0 - world.settings.D_safe
+    lane (:func:`_lane_change_length`, as :func:`lateral_due` plans it) fits into the gap to the
+    front's rear less D_safe. The front's own travel is not counted: the safety layer assumes it
+    may brake (only not speed up) while it is passed, so a pull-out that needs it to drive on
+    cannot be verified. Closer, the ego would be half out of its lane behind the vehicle, where
+    no fail-safe verifies (it can neither steer back while it brakes nor get out past a front
+    that brakes), so it keeps to its waiting room (:func:`waiting_room`) first."""
+    gap = float(front.s[0]) - front.offset - s0 - world.settings.D_safe
+    return _lane_change_length(world, params, v0, shift) <= gap
 
 
 def pass_time(world: World, front: Front, s0: float, v0: float) -> tuple[float, float, float]:
