@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from helpers.safety_worlds import ego_on, world
 from twolevel.models import fourwheel as fw
-from twolevel.safety.failsafe import FULL, PASS_PACE, FailSafeSettings, Manoeuvre, brake_rate, manoeuvres, roll
+from twolevel.safety.failsafe import FULL, KEEP_MIN, FailSafeSettings, Manoeuvre, brake_rate, manoeuvres, roll
 from twolevel.safety.network import network_of
 from twolevel.safety.verify import ego_params
 
@@ -72,9 +72,10 @@ def test_no_clearing_without_a_zone_in_reach():
 @given(v0=st.floats(0.0, 15.0), ahead=st.floats(0.0, 300.0))
 def test_completing_a_pass_at_its_speed_only_at_a_pace_that_gets_there(v0, ahead):
     """A car out of its lane beside what it passes completes the pass keeping its speed only at
-    PASS_PACE or more and when that gets it past within max_time (a crawl would not brake before
-    its time is up: its rollout ran to max_time in half-second segments, to fail); gaining speed,
-    creeping back and braking back into the lane are always tried."""
+    KEEP_MIN or more and when that gets it past within max_time (a crawl would not brake before
+    its time is up: its rollout ran to max_time in half-second segments, to fail; a pull-out from
+    rest at 2 m/s does get there and is what verifies it); gaining speed, creeping back and braking
+    back into the lane are always tried."""
     fs = FailSafeSettings()
     s0 = 50.0
     plan = manoeuvres(fs, np.zeros((0, 2)), s0, v0, 9.0, (0.0, s0 + ahead, 3.0))
@@ -83,7 +84,7 @@ def test_completing_a_pass_at_its_speed_only_at_a_pace_that_gets_there(v0, ahead
     assert len(gain) == 1 and sum(m.clear_accel == 1.0 for m in plan) == 1  # the creep
     assert {m.decel for m in plan if m.clear_accel is None} == {min(fs.decels), max(fs.decels)}
     distance = gain[0].s_clear - s0
-    assert len(keep) == (1 if v0 >= PASS_PACE and distance <= v0 * fs.max_time else 0)
+    assert len(keep) == (1 if v0 >= KEEP_MIN and distance <= v0 * fs.max_time else 0)
 
 
 def test_a_kept_crawl_too_slow_for_the_distance_does_not_stop_in_time():

@@ -90,7 +90,7 @@ def _check_pass(p: Pass, obstacle_x: float, *, decel: float = 4.0) -> None:
 @pytest.mark.slow
 def test_the_ego_waits_for_an_oncoming_car_then_passes_a_stalled_car(runs) -> None:
     p = runs("overtake_wait_oncoming")
-    _check_pass(p, 80.0, decel=6.0)  # see test_the_pull_out_from_rest_brakes_hard
+    _check_pass(p, 80.0)
     first_out = p.t[np.argmax(p.over > 0.0)]
     assert first_out > p.level[0]  # it let the oncoming car go by first
     assert p.v[(p.t > 8.0) & (p.t < p.level[0])].max() < STANDING  # waiting behind the stalled car
@@ -131,17 +131,17 @@ def test_the_pull_out_into_the_long_gap_brakes_hard(stream: Pass) -> None:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["overtake_wait_oncoming", "overtake_parked_half"])
-@pytest.mark.xfail(strict=True, reason="on main since the right-of-way and no-passing-right changes, the first "
-                   "step of the pull-out from rest is refuted by the verifier as in the stream, and the ego "
-                   "brakes at the 4 m/s² fail-safe (5.6 m/s² measured) before it goes (2.96 m/s² before them)")
-def test_the_pull_out_from_rest_brakes_hard(runs, name: str) -> None:
+def test_the_pull_out_from_rest_is_gentle(runs, name: str) -> None:
+    """Regression: with completing the pass at the speed it has offered only from 3 m/s, the
+    verifier refused the first steps of the pull-out from rest (2 m/s) and the ego braked at
+    5.6 m/s² before it went."""
     assert runs(name).decel <= 4.0
 
 
 @pytest.mark.slow
 def test_the_ego_passes_a_car_parked_half_in_its_lane_once_the_oncoming_car_is_by(runs) -> None:
     p = runs("overtake_parked_half")
-    _check_pass(p, 80.0, decel=6.0)  # see test_the_pull_out_from_rest_brakes_hard
+    _check_pass(p, 80.0)
     assert p.t[np.argmax(p.over > 0.0)] > p.level[0]
 
 

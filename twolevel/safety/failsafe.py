@@ -172,19 +172,19 @@ PASS_PACE = 3.0
 slower the car gains speed to complete it."""
 
 
-def _moves(accel: float, v0: float, distance: float, max_time: float, pace: float = KEEP_MIN) -> bool:
+def _moves(accel: float, v0: float, distance: float, max_time: float) -> bool:
     """Whether holding ``accel`` [m/s²] from speed ``v0`` [m/s] gets to a point ``distance`` [m]
-    ahead within ``max_time`` [s]: keeping a speed below ``pace`` [m/s] does not count, nor one too
+    ahead within ``max_time`` [s]: keeping a speed below :data:`KEEP_MIN` does not count, nor one too
     slow for the distance (the manoeuvre would not brake before its time is up: its rollout, in
     half-second segments when it returns to the lane, would run to ``max_time`` and fail)."""
-    return accel > 0 or (v0 >= pace and distance <= v0 * max_time)
+    return accel > 0 or (v0 >= KEEP_MIN and distance <= v0 * max_time)
 
 
 def _returning(settings: FailSafeSettings, s0: float, v0: float, brake_full: float, e_goal: float,
                s_past: float, e_beside: float) -> list[Manoeuvre]:
     """:func:`manoeuvres` for a car out of the route's lane (its ``back``): the gentlest and the
     full braking level, the creep, and completing the pass at the speed it has (at
-    :data:`PASS_PACE` or more, when that gets it there in time: :func:`_moves`) or gaining 1.5
+    :data:`KEEP_MIN` or more, when that gets it there in time: :func:`_moves`) or gaining 1.5
     m/s², braking gently after — completing first when the car is already out beside what it
     passes (the likeliest to pass verification, tried alone first; few manoeuvres, since each is
     rolled out in half-second closed-loop segments)."""
@@ -202,7 +202,7 @@ def _returning(settings: FailSafeSettings, s0: float, v0: float, brake_full: flo
         brake = min(settings.clear_brakes) if settings.clear_brakes else levels[0]
         complete = [Manoeuvre(brake, a, start + d_ret, e_goal, start, d_ret, e_beside, s0, d_out)
                     for a in sorted({0.0, max(settings.clear_accels, default=0.0)})
-                    if _moves(a, v0, start + d_ret - s0, settings.max_time, PASS_PACE)]
+                    if _moves(a, v0, start + d_ret - s0, settings.max_time)]
         out = complete + out if abs(e_beside - e_goal) > 0 and v0 > 1.0 else out + complete
     return out
 
