@@ -12,7 +12,10 @@ from hypothesis import strategies as st
 
 from helpers.safety_worlds import ego_on, world
 from twolevel.models import fourwheel as fw
-from twolevel.safety.failsafe import FULL, KEEP_MIN, FailSafeSettings, Manoeuvre, brake_rate, manoeuvres, roll
+from twolevel.models.params import VehicleParams
+from twolevel.models.rollout import rollout
+from twolevel.safety.failsafe import (FULL, KEEP_MIN, FailSafeSettings, Manoeuvre, _roll_live, brake_rate, manoeuvres,
+                                      return_path, roll)
 from twolevel.safety.network import network_of
 from twolevel.safety.verify import ego_params
 
@@ -94,3 +97,40 @@ def test_a_kept_crawl_too_slow_for_the_distance_does_not_stop_in_time():
     p = ego_params(w)
     (fs,) = roll(ego_on(w, "road", 10.0, 1.1), [Manoeuvre(4.0, 0.0, 50.0)], w.route, 10.0, w.settings.dt, p)
     assert not fs.stopped and fs.t_stop == pytest.approx(FailSafeSettings().max_time)
+
+
+@settings(max_examples=30, deadline=None)
+@given(live=st.lists(st.booleans(), min_size=1, max_size=5), v=st.floats(0.0, 25.0),
+       delta=st.floats(-0.3, 0.3), gamma=st.floats(-1.0, 1.0), n=st.sampled_from([1, 5, 10]))
+def test_rolling_only_the_moving_fail_safes_gives_their_states_of_the_whole_batch(live, v, delta, gamma, n):
+    """The segments of a fail-safe roll simulate only the manoeuvres that have not stopped: each
+    such row's states are bit for bit those of rolling out the whole batch; the others stand."""
+    p, K = VehicleParams(), len(live)
+    x = np.stack([fw.initial_state(v=v + k) for k in range(K)])
+    u = np.broadcast_to(np.array([delta, gamma]) * np.linspace(1.0, 0.5, K)[:, None, None], (K, n, 2)).copy()
+    mask = np.array(live)
+    whole = rollout(x, u, 0.1, p).states
+    got = _roll_live(x, u, mask, 0.1, p, "auto")
+    assert got.shape == whole.shape
+    assert np.array_equal(got[mask], whole[mask])
+    assert np.array_equal(got[~mask], np.repeat(x[~mask][:, None], n + 1, axis=1))
+
+
+@settings(max_examples=200, deadline=None)
+@given(rows=st.lists(st.tuples(st.floats(-4, 4), st.one_of(st.just(math.nan), st.floats(-4, 4)), st.floats(0, 50),
+                               st.floats(0, 30), st.one_of(st.just(math.nan), st.floats(-4, 4)), st.floats(0, 50),
+                               st.floats(0, 30)), min_size=1, max_size=4),
+       s=st.lists(st.floats(-10, 120), min_size=2, max_size=6))
+def test_the_return_path_on_a_grid_at_once_is_column_by_column_the_same(rows, s):
+    """A fail-safe's roll evaluates the lateral path once per segment, at its start and along its
+    profile together ((K, n+1) positions, the manoeuvres as (K, 1) rows): each column equals the
+    path evaluated at that column alone with the manoeuvres as (K,) arrays, bit for bit."""
+    a = np.array(rows)
+    e_from = a[:, 0]
+    path = tuple(a[:, i] for i in range(1, 7))
+    grid = np.array(s)[None, :] + np.arange(len(a))[:, None]  # (K, n+1)
+    together = return_path(e_from[:, None], tuple(p[:, None] for p in path), grid)
+    for j in range(grid.shape[1]):
+        alone = return_path(e_from, path, grid[:, j])
+        for t, o in zip(together, alone):
+            assert np.array_equal(t[:, j], o)

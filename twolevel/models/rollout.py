@@ -126,7 +126,7 @@ def compiled_available() -> bool:
         return False
 
 
-@functools.lru_cache(maxsize=32)
+@functools.lru_cache(maxsize=128)  # the fail-safes roll the manoeuvres still moving: K varies
 def _batch_function(p: VehicleParams, dt: float, H: int, K: int, accel: bool, jit: bool) -> Any:
     """casadi Function (x0 (12×K), U (2×HK)) → states (12×HK), columns k-major per candidate."""
     import casadi as ca

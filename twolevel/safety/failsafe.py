@@ -212,7 +212,7 @@ def _smooth_step(s: np.ndarray, start: np.ndarray, length: np.ndarray, rise: np.
     """``rise`` · (3u² − 2u³), u = (s − start)/length clipped to [0, 1], with its first and second
     derivatives along s."""
     d = np.maximum(length, 1e-3)
-    u = np.clip((s - start) / d, 0.0, 1.0)
+    u = np.minimum(np.maximum((s - start) / d, 0.0), 1.0)  # np.clip's, without its wrapper's overhead
     inside = (u > 0.0) & (u < 1.0)
     return (rise * (3 * u**2 - 2 * u**3), np.where(inside, rise * 6 * u * (1 - u) / d, 0.0),
             np.where(inside, rise * (6 - 12 * u) / d**2, 0.0))
@@ -226,12 +226,27 @@ def return_path(e_from: np.ndarray, path: tuple[np.ndarray, ...], s: np.ndarray
     e_out over [s_out, s_out + d_out] (none where e_out is NaN), then one to ``e_goal`` over
     [s_return, s_return + d_return]; with its slope [-] and curvature [1/m] along s. NaN goals give
     the route's centre line (0, 0, 0)."""
+    return _path_at(e_from, _path_steps(e_from, path), s)
+
+
+_Steps = tuple[tuple[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+
+
+def _path_steps(e_from: np.ndarray, path: tuple[np.ndarray, ...]) -> _Steps:
+    """:func:`return_path`'s two smooth steps, (start [m], length [m], rise [m]) each, and where
+    there is no goal: what does not depend on s (a rollout computes it once)."""
     e_out, s_out, d_out, e_goal, s_ret, d_ret = path
     out = ~np.isnan(e_out)
     mid = np.where(out, e_out, e_from)
-    e1, g1, c1 = _smooth_step(s, s_out, d_out, np.where(out, e_out - e_from, 0.0))
-    e2, g2, c2 = _smooth_step(s, s_ret, d_ret, np.nan_to_num(e_goal - mid))
-    none = np.isnan(e_goal)
+    return ((s_out, d_out, np.where(out, e_out - e_from, 0.0)), (s_ret, d_ret, np.nan_to_num(e_goal - mid)),
+            np.isnan(e_goal))
+
+
+def _path_at(e_from: np.ndarray, steps: _Steps, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`return_path` at ``s`` [m] from its steps (:func:`_path_steps`)."""
+    first, second, none = steps
+    e1, g1, c1 = _smooth_step(s, *first)
+    e2, g2, c2 = _smooth_step(s, *second)
     return (np.where(none, 0.0, e_from + e1 + e2), np.where(none, 0.0, g1 + g2), np.where(none, 0.0, c1 + c2))
 
 
@@ -243,6 +258,19 @@ def _wrap(a: np.ndarray) -> np.ndarray:
 def brake_rate(params: VehicleParams) -> float:
     """Full braking's deceleration [m/s²] (γ = −1, quasi-static, at low speed)."""
     return float(-accel_from_gamma(-1.0, 0.0, params))
+
+
+def _roll_live(x: np.ndarray, u: np.ndarray, live: np.ndarray, dt: float, params: VehicleParams,
+               backend: Backend) -> np.ndarray:
+    """The states (K, n+1, 12) of the rows ``live`` (K,) of the rollout of commands ``u`` (K, n, 2)
+    from ``x`` (K, 12); the other rows (fail-safes that have stopped: their states after the stop
+    are never read) stand at their ``x`` — only the live rows are simulated."""
+    if live.all():
+        return rollout(x, u, dt, params, backend).states
+    ro = np.repeat(x[:, None, :], u.shape[1] + 1, axis=1)
+    if live.any():
+        ro[live] = rollout(x[live], u[live], dt, params, backend).states
+    return ro
 
 
 def roll(x0: np.ndarray, plan: list[Manoeuvre], route: Route, s0: float, dt: float, params: VehicleParams,
@@ -289,6 +317,7 @@ def roll(x0: np.ndarray, plan: list[Manoeuvre], route: Route, s0: float, dt: flo
         e_psi = _wrap(x[:, 2] - route.heading_at(s))
         if e_from is None:
             e_from = e.copy()[:, None]
+            steps = _path_steps(e_from, path_rows)
         # the profile: clear (hold clear_a until s_clear), then brake at decel to standstill
         clearing = has_clear & (s < s_clear)
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -313,16 +342,17 @@ def roll(x0: np.ndarray, plan: list[Manoeuvre], route: Route, s0: float, dt: flo
         a_k = np.where(in_clear, ca_col, -decel_col)
         gamma = np.where(full_col & ~in_clear, -1.0, gamma_from_accel(a_k, v_pred, params))
         # steering: curvature along the profile + Stanley's correction, faded out over a second
-        _, _, path_curv = return_path(e_from, path_rows, s_pred)
+        # the path at the start (column 0: the errors) and along the profile (its curvature), at once
+        e_path, slope, path_curv = _path_at(e_from, steps, np.concatenate([s[:, None], s_pred], axis=1))
+        e_path, slope, path_curv = e_path[:, 0], slope[:, 0], path_curv[:, 1:]
         ff = np.arctan(L * (route.curvature_at(np.minimum(s_pred, s_last)) + path_curv))
         fade = np.clip(1.0 - tk / 1.0, 0.0, 1.0)
-        e_path, slope, _ = return_path(e_from[:, 0], path, s)
         fb = -(st.k_heading * (e_psi - np.arctan(slope)) + np.arctan2(st.k_lateral * (e - e_path), v + 1.0))
         bound = np.minimum(st.delta_max, np.arctan(st.a_lat_max * L / np.maximum(v_pred**2, 1e-6)))
         delta = np.clip(ff + fb[:, None] * fade, -bound, bound)
         u = np.stack([delta, gamma], axis=-1)  # (K, n, 2)
         u[stop_at >= 0] = np.array([0.0, -1.0])  # stopped ones hold the brake
-        ro = rollout(x, u, dt, params, backend).states  # (K, n+1, 12)
+        ro = _roll_live(x, u, stop_at < 0, dt, params, backend)  # (K, n+1, 12)
         controls.append(u)
         states.append(ro[:, 1:])
         stopped = ro[:, 1:, 3] <= st.v_stop
