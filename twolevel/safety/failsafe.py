@@ -341,8 +341,8 @@ def roll(x0: np.ndarray, plan: list[Manoeuvre], route: Route, s0: float, dt: flo
                           s_c[:, None] + v_c[:, None] * tb_stop - 0.5 * decel_col * tb_stop**2)
         a_k = np.where(in_clear, ca_col, -decel_col)
         gamma = np.where(full_col & ~in_clear, -1.0, gamma_from_accel(a_k, v_pred, params))
-        # steering: curvature along the profile + Stanley's correction, faded out over a second
-        # the path at the start (column 0: the errors) and along the profile (its curvature), at once
+        # steering: curvature along the profile + Stanley's correction, faded out over a second;
+        # the lateral path at the start (column 0: the errors) and along the profile (its curvature) at once
         e_path, slope, path_curv = _path_at(e_from, steps, np.concatenate([s[:, None], s_pred], axis=1))
         e_path, slope, path_curv = e_path[:, 0], slope[:, 0], path_curv[:, 1:]
         ff = np.arctan(L * (route.curvature_at(np.minimum(s_pred, s_last)) + path_curv))
