@@ -6,6 +6,8 @@ import signal
 
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 
 from twolevel.models import actuation as act, fourwheel as fw
 from twolevel.models.obb import box_corners
@@ -138,3 +140,16 @@ def test_a_ctrl_c_while_the_compiler_runs_is_not_lost(tmp_path) -> None:
     )
     out = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert out.stdout.split() == ["received", str(int(signal.SIGINT))], out.stderr
+
+
+@settings(max_examples=200, deadline=None)
+@given(a=st.lists(st.floats(-15.0, 0.0), min_size=1, max_size=8), v=st.floats(0.0, 40.0))
+def test_the_braking_only_gamma_is_that_of_the_mixed_batch(a, v):
+    """γ for decelerations only (a fail-safe's braking: the drive's grip is not computed) is, bit
+    for bit, what the same entries get in a batch with an accelerating one (the general path)."""
+    p = VehicleParams()
+    acc, speed = np.array(a), np.full(len(a), v)
+    assume(np.all(act.effective_mass(p) * acc + act.resistance_force(speed, p) < 0))  # braking throughout
+    alone = act.gamma_from_accel(acc, speed, p)
+    mixed = act.gamma_from_accel(np.append(acc, 2.0), np.append(speed, v), p)
+    assert np.array_equal(alone, mixed[:-1])

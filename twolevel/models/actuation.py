@@ -124,6 +124,8 @@ def gamma_from_accel(a: Any, v: Any, p: VehicleParams, xp: Any = np) -> Any:
     Inverse of :func:`accel_from_gamma`; a beyond what the car can do saturates at ±1.
     """
     need = effective_mass(p) * a + resistance_force(v, p, xp)
+    if xp is np and not np.any(need >= 0.0):  # braking throughout (a fail-safe): the drive is not needed
+        return np.fmin(np.fmax(need / brake_force_available(p), -1.0), 1.0)
     drive = drive_force_available(v, p, xp, xp.fmin(xp.fmax(a, -10.0), 10.0))  # loads at a feasible a
     gamma = xp.where(need >= 0.0, need / drive, need / brake_force_available(p))
     return xp.fmin(xp.fmax(gamma, -1.0), 1.0)
