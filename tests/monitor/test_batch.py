@@ -41,3 +41,24 @@ def test_shared_signals_broadcast_and_builtin() -> None:
 def test_missing_signal_is_a_monitor_error() -> None:
     with pytest.raises(MonitorError):
         robustness_batch(A.Compare("<", A.Var("q"), A.Num(1.0)), {"v": np.zeros((2, 3))}, 0.1)
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.integers(2, 10).flatmap(lambda n: st.lists(F.signals(n), min_size=1, max_size=3)), F.formulas(),
+       st.integers(0, 30))
+def test_signals_the_formula_does_not_read_change_nothing(traces, formula, extra):
+    """The batch evaluator makes (K, T) views of the signals a formula reads, when it reads them:
+    with many more signals beside (shared or per candidate) the robustness is the same, bit for bit."""
+    signals = _stack(traces)
+    K, T = next(iter(signals.values())).shape
+    rng = np.random.default_rng(extra)
+    more = {**signals, **{f"unused_{i}": rng.normal(size=(K, T) if i % 2 else T) for i in range(extra)}}
+    assert np.array_equal(robustness_batch(formula, more, 1.0), robustness_batch(formula, signals, 1.0),
+                          equal_nan=True)
+
+
+def test_a_signal_with_more_than_two_axes_is_refused():
+    rf, _ = parse("input float v\nr = always (v <= 2);", "x.stl")
+    assert rf is not None
+    with pytest.raises(MonitorError, match=r"\(K, T\) or \(T,\)"):
+        robustness_batch(rf.rules[0].formula, {"v": np.zeros((2, 4)), "w": np.zeros((2, 3, 4))}, 0.1)
