@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 
 from twolevel.models import actuation as act, fourwheel as fw
 from twolevel.models.obb import box_corners
+from twolevel.models.ops import NP
 from twolevel.models.params import BicycleParams, InvalidParameterError, UnknownParameterError, VehicleParams
 from twolevel.models.rollout import compiled_available, rollout, rollout_accel
 
@@ -153,3 +154,16 @@ def test_the_braking_only_gamma_is_that_of_the_mixed_batch(a, v):
     alone = act.gamma_from_accel(acc, speed, p)
     mixed = act.gamma_from_accel(np.append(acc, 2.0), np.append(speed, v), p)
     assert np.array_equal(alone, mixed[:-1])
+
+
+@settings(max_examples=200, deadline=None)
+@given(gamma=st.lists(st.floats(-1.2, 1.2), min_size=1, max_size=12), v=st.lists(st.floats(0.0, 45.0), min_size=1,
+                                                                                     max_size=12))
+def test_the_acceleration_stopped_at_its_fixed_point_is_that_of_all_iterations(gamma, v):
+    """The quasi-static acceleration's fixed-point iteration stops once an iterate repeats bit for
+    bit: the same as all 25 iterations (numpy's functions through the casadi-style namespace, which
+    always runs them), and at once when every entry brakes."""
+    p = VehicleParams()
+    n = min(len(gamma), len(v))
+    g, speed = np.array(gamma[:n]), np.array(v[:n])
+    assert np.array_equal(act.accel_from_gamma(g, speed, p), act.accel_from_gamma(g, speed, p, NP))

@@ -114,7 +114,10 @@ def accel_from_gamma(gamma: Any, v: Any, p: VehicleParams, xp: Any = np) -> Any:
     brake = xp.fmin(g, 0.0) * brake_force_available(p) - resistance_force(v, p, xp)
     a = brake / effective_mass(p)
     for _ in range(25):
-        a = (xp.fmax(g, 0.0) * drive_force_available(v, p, xp, a) + brake) / effective_mass(p)
+        nxt = (xp.fmax(g, 0.0) * drive_force_available(v, p, xp, a) + brake) / effective_mass(p)
+        if xp is np and np.array_equal(nxt, a):  # a fixed point, bit for bit: the rest would repeat it
+            return nxt
+        a = nxt
     return a
 
 
