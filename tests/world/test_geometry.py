@@ -8,7 +8,7 @@ import numpy as np
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from twolevel.world.geometry import LaneSet, lane_from_reference, sample_road
+from twolevel.world.geometry import LaneSet, _clamp, lane_from_reference, sample_road
 from twolevel.world.schema import Road
 
 radius = st.floats(5, 2000)
@@ -82,3 +82,14 @@ def test_lane_lookup_tells_lanes_and_directions_apart() -> None:
     assert list(lane) == [0] or list(lane) == [-1]
     p, h = ls.pose(np.array([0, 1]), np.array([30.0, 30.0]))
     assert np.allclose(p, [[30, -1.75], [70, 1.75]]) and np.allclose(np.cos(h), [1, -1])
+
+
+@settings(max_examples=300, deadline=None)
+@given(i=st.one_of(st.integers(-10**6, 10**6), st.lists(st.integers(-10**6, 10**6), min_size=1, max_size=20)),
+       lo=st.integers(-50, 50), width=st.integers(-5, 100))
+def test_index_clamp_is_np_clip(i, lo, width):
+    """The look-ups' index clamp gives np.clip's result, value and type, for scalars and arrays
+    (also when the bounds cross: an empty table)."""
+    a = np.asarray(i) if isinstance(i, list) else np.intp(i)
+    got, want = _clamp(a, lo, lo + width), np.clip(a, lo, lo + width)
+    assert type(got) is type(want) and np.array_equal(got, want)

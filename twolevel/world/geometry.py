@@ -45,7 +45,7 @@ class Polyline:
         return float(self.s[-1] - self.s[0])
 
     def _index(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        i = np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, len(self.s) - 2)
+        i = _clamp(np.searchsorted(self.s, s, side="right") - 1, 0, len(self.s) - 2)
         ds = self.s[i + 1] - self.s[i]
         t = np.where(ds > 0, (s - self.s[i]) / np.where(ds > 0, ds, 1.0), 0.0)
         return i, t
@@ -251,10 +251,16 @@ def concatenate(pieces: list[tuple[Polyline, float, float]]) -> Polyline:
     return Polyline(np.concatenate(pts), np.concatenate(ss), np.concatenate(hs), np.concatenate(ks))
 
 
+def _clamp(i: np.ndarray, lo: int, hi: int) -> np.ndarray:
+    """Integer indices ``i`` clipped to [lo, hi]: np.clip's result without its wrapper's overhead
+    (the projections and look-ups call it thousands of times a step)."""
+    return np.minimum(np.maximum(i, lo), hi)
+
+
 def step_index(key: np.ndarray, q: np.ndarray | float) -> np.ndarray:
     """Which piece of a piecewise-constant table with sorted breakpoints ``key`` is in force at
     ``q``: the last breakpoint at or before it (the first one before them all); broadcast over ``q``."""
-    return np.clip(np.searchsorted(key, q, side="right") - 1, 0, len(key) - 1)
+    return _clamp(np.searchsorted(key, q, side="right") - 1, 0, len(key) - 1)
 
 
 @dataclass(frozen=True, eq=False)
@@ -415,10 +421,10 @@ class LaneSet:
         """The interval (index into the vertex arrays) holding (lane, s) and the fraction along it
         (beyond a lane's ends: its end interval, the fraction outside [0, 1])."""
         q = self.base[lane] + s
-        i = np.clip(np.searchsorted(self.key, q, side="right") - 1, 0, len(self.key) - 2)
+        i = _clamp(np.searchsorted(self.key, q, side="right") - 1, 0, len(self.key) - 2)
         # keep the interval inside the lane (extrapolate at the ends)
         i = np.where(self.seg_lane[i] == lane, i, np.where(self.seg_lane[np.maximum(i - 1, 0)] == lane, i - 1, i + 1))
-        i = np.clip(i, 0, len(self.key) - 2)
+        i = _clamp(i, 0, len(self.key) - 2)
         dk = self.key[i + 1] - self.key[i]
         return i, np.where(dk > 0, (q - self.key[i]) / np.where(dk > 0, dk, 1.0), 0.0)
 
@@ -670,7 +676,7 @@ class Route(Polyline):
         M = len(pts)
         n = len(self.s) - 1
         w = min(int(math.ceil(2 * half_window / self.spacing)) + 2, n)
-        i0 = np.clip(np.floor((np.asarray(s_center, dtype=float) - half_window) / self.spacing).astype(int), 0, n - w)
+        i0 = _clamp(np.floor((np.asarray(s_center, dtype=float) - half_window) / self.spacing).astype(int), 0, n - w)
         half_len = 0.5 * _max_interval(self)
         vidx = i0[:, None] + np.arange(w + 1)[None, :]  # (M, W+1) vertex indices
         dv = np.hypot(self.points[:, 0][vidx] - pts[:, 0:1], self.points[:, 1][vidx] - pts[:, 1:2])
