@@ -62,9 +62,10 @@ def _interrupt(proc: subprocess.Popen, signame: str, ready: Callable[[], bool] |
     return "".join(seen) + out, err
 
 
-def _some_run(runs: Path, status: str) -> bool:
-    """Some run below ``runs`` has ``status`` in its run.json ("running": under way)."""
-    for meta in runs.glob("*/run.json"):
+def _some_run(runs: Path, status: str, name: str = "*") -> bool:
+    """Some run below ``runs`` (whose folder matches ``name``) has ``status`` in its run.json
+    ("running": under way)."""
+    for meta in runs.glob(f"{name}/run.json"):
         try:
             if json.loads(meta.read_text())["status"] == status:
                 return True
@@ -87,13 +88,30 @@ def _said(signame: str) -> str:
     return "interrupted by the user (Ctrl-C)" if signame == "SIGINT" else f"interrupted by {signame}"
 
 
+def _suite_with_a_long_case(tmp: Path) -> Path:
+    """The suite with its stuck case running 120 s instead of 10 (≈ 20 s of wall time): the case
+    under way when the signal comes is that one, not a sub-second case that may complete before the
+    signal reaches its worker (a race the faster steps made likely under load)."""
+    out = tmp / "suite"
+    out.mkdir()
+    root = SCENARIOS.parent.parent
+    for f in SUITE.glob("*.yaml"):
+        text = f.read_text().replace("../../../rules/", f"{root}/rules/").replace("map: ../", f"map: {SCENARIOS}/")
+        if f.name == "stuck.yaml":
+            text = text.replace("run: {duration: 10,", "run: {duration: 120,")
+        (out / f.name).write_text(text)
+    return out
+
+
 @pytest.mark.parametrize("signame", ["SIGINT", "SIGTERM", "SIGHUP"])
 def test_an_interrupted_suite_writes_what_completed_and_stops_its_workers(tmp_path: Path, signame: str) -> None:
-    proc = _start(["test", str(SUITE), "-j", "2", "--runs-dir", "runs", "--keep-passed", "--junit-xml", "junit.xml",
+    suite = _suite_with_a_long_case(tmp_path)
+    proc = _start(["test", str(suite), "-j", "2", "--runs-dir", "runs", "--keep-passed", "--junit-xml", "junit.xml",
                    "--json", "results.json", "--cache-file", "cache.json"], tmp_path)
-    # after the first case's line ("PASSED  <case> (6.8 s)"), once a case is under way (a run that
-    # has not written its run.json yet is cancelled, not interrupted: nothing would record it)
-    out, err = _interrupt(proc, signame, ready=lambda: _some_run(tmp_path / "runs", "running"), line=" s)")
+    # after the first case's line ("PASSED  <case> (6.8 s)"), once the long case is under way (a
+    # run that has not written its run.json yet is cancelled, not interrupted: nothing records it)
+    out, err = _interrupt(proc, signame, ready=lambda: _some_run(tmp_path / "runs", "running", "*stuck*"),
+                          line=" s)")
     assert proc.returncode == 128 + getattr(signal, signame), (out, err)
     assert "Traceback" not in err and err.strip().splitlines() == [err.strip()], err
     assert err.startswith(f"twolevel: {_said(signame)}: ") and " of 8 cases completed" in err
