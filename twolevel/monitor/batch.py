@@ -10,12 +10,12 @@ signals differs, so K candidates cost one pass of numpy calls instead of K.
 
 from __future__ import annotations
 
-from typing import Callable, Iterator, Mapping, Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 
 from twolevel.monitor.errors import MonitorError
-from twolevel.monitor.robustness import DEFAULT_BUILTINS, ArrayEvaluator, Builtin
+from twolevel.monitor.robustness import DEFAULT_BUILTINS, ArrayEvaluator, Builtin, _Broadcast
 from twolevel.stl import ast
 
 __all__ = ["BatchEvaluator", "robustness_batch", "evaluate_rules_batch"]
@@ -42,8 +42,8 @@ class BatchEvaluator(ArrayEvaluator):
         if any(len(s) > 2 for s in shapes):
             raise MonitorError("signals must be (K, T) or (T,) arrays")
         # as (K, T) views when the formula reads them (a rule reads a few of the many signals)
-        self.signals = _Full(signals, self.full)
-        self.rules = _Full(rules, self.full)
+        self.signals = _Broadcast(signals, self.full)
+        self.rules = _Broadcast(rules, self.full)
         self.consts = consts
         self.builtins = builtins
 
@@ -54,29 +54,6 @@ class BatchEvaluator(ArrayEvaluator):
     def run(self, root: ast.Node) -> np.ndarray:
         with np.errstate(all="ignore"):  # a candidate's overflow is a value, not a warning
             return np.array(super().run(root), dtype=np.float64)
-
-
-class _Full(Mapping[str, np.ndarray]):
-    """``values`` each as :meth:`BatchEvaluator.full` makes it, when first read."""
-
-    def __init__(self, values: Mapping[str, np.ndarray], full: Callable[[np.ndarray], np.ndarray]) -> None:
-        self._values, self._full = values, full
-        self._done: dict[str, np.ndarray] = {}
-
-    def __getitem__(self, name: str) -> np.ndarray:
-        hit = self._done.get(name)
-        if hit is None:
-            hit = self._done[name] = self._full(self._values[name])
-        return hit
-
-    def __contains__(self, name: object) -> bool:
-        return name in self._values
-
-    def __iter__(self) -> Iterator[str]:
-        return iter(self._values)
-
-    def __len__(self) -> int:
-        return len(self._values)
 
 
 def robustness_batch(

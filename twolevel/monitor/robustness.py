@@ -251,14 +251,19 @@ class ArrayEvaluator:
 
 
 class _Broadcast(Mapping[str, np.ndarray]):
-    """An evaluator's signals seen from inside a quantifier: each with an axis for the
-    participants inserted before time (length 1, broadcast)."""
+    """Signals each seen through ``view`` (a broadcast) when read, since a formula reads a few of
+    the many: an evaluator's from inside a quantifier (:class:`_Bound`: an axis for the
+    participants inserted before time), or as (K, T) in the batched monitor
+    (:class:`twolevel.monitor.batch.BatchEvaluator`)."""
 
-    def __init__(self, signals: Mapping[str, np.ndarray], shape: tuple[int, ...]) -> None:
-        self._signals, self._shape = signals, shape
+    def __init__(self, signals: Mapping[str, np.ndarray], view: Callable[[np.ndarray], np.ndarray]) -> None:
+        self._signals, self._view = signals, view
 
     def __getitem__(self, name: str) -> np.ndarray:
-        return np.broadcast_to(np.asarray(self._signals[name])[..., None, :], self._shape)
+        return self._view(self._signals[name])
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._signals
 
     def __iter__(self) -> Iterator[str]:
         return iter(self._signals)
@@ -276,10 +281,14 @@ class _Bound(ArrayEvaluator):
         self.outer, self.var, self.pids = outer, var, tuple(pids)
         self.n, self.dt = outer.n, outer.dt
         self.shape = outer.shape[:-1] + (len(self.pids), outer.shape[-1])
-        self.signals = _Broadcast(outer.signals, self.shape)
-        self.rules = _Broadcast(outer.rules, self.shape)
+        self.signals = _Broadcast(outer.signals, self._inserted)
+        self.rules = _Broadcast(outer.rules, self._inserted)
         self.consts, self.builtins = outer.consts, outer.builtins
         self._stacks: dict[str, np.ndarray] = {}
+
+    def _inserted(self, v: np.ndarray) -> np.ndarray:
+        """An outer value with an axis for the participants inserted before time (length 1, broadcast)."""
+        return np.broadcast_to(np.asarray(v)[..., None, :], self.shape)
 
     def full(self, value: float) -> np.ndarray:
         return np.full(self.shape, value)
