@@ -168,8 +168,9 @@ pass from a (near) standstill gains speed."""
 
 
 PASS_PACE = 3.0
-"""[m/s] The slowest speed a pass is completed at: the path out and back is laid out for it, and
-slower the car gains speed to complete it."""
+"""[m/s] The slowest speed the path of a completed pass is laid out for (its way back into the
+lane is as long as at this speed): a slower car keeps its speed along it (from :data:`KEEP_MIN`,
+:func:`_moves`) or gains speed."""
 
 
 def _moves(accel: float, v0: float, distance: float, max_time: float) -> bool:
