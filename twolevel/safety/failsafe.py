@@ -352,7 +352,6 @@ def roll(x0: np.ndarray, plan: list[Manoeuvre], route: Route, s0: float, dt: flo
         bound = np.minimum(st.delta_max, np.arctan(st.a_lat_max * L / np.maximum(v_pred**2, 1e-6)))
         delta = np.clip(ff + fb[:, None] * fade, -bound, bound)
         u = np.stack([delta, gamma], axis=-1)  # (K, n, 2)
-        u[stop_at >= 0] = np.array([0.0, -1.0])  # stopped ones hold the brake
         ro = _roll_live(x, u, stop_at < 0, dt, params, backend)  # (K, n+1, 12)
         controls.append(u)
         states.append(ro[:, 1:])
