@@ -47,8 +47,8 @@ import numpy as np
 from twolevel.safety.failsafe import FailSafeSettings
 from twolevel.safety.network import network_of
 from twolevel.safety.occupancy import reach_bounds, time_to_travel
-from twolevel.stl.analysis import PRESENT, participant_key, split_participant_key
-from twolevel.stl.ast import Abs, Arith, Compare, Neg, Node, Num, ParticipantSignal
+from twolevel.stl.analysis import PRESENT, fold_term, participant_key, split_participant_key
+from twolevel.stl.ast import Compare, Node, Num, ParticipantSignal, rewrite
 from twolevel.stl.typecheck import RuleSet
 from twolevel.world.provided import PARTICIPANT_ABSENT
 from twolevel.world.right_of_way import (REACH_DISTANCE, ZONE_PARTICIPANT_SIGNALS, next_area,
@@ -86,19 +86,13 @@ class GapRule:
 
 
 def _value(term: Node, d: float) -> float:
-    """A term of numbers and ``d_exit(o)`` at d_exit = ``d`` [m] (``ValueError``: it reads more)."""
-    if isinstance(term, Num):
-        return float(term.value)
-    if isinstance(term, ParticipantSignal) and term.name == "d_exit":
-        return d
-    if isinstance(term, Neg):
-        return -_value(term.operand, d)
-    if isinstance(term, Abs):
-        return abs(_value(term.operand, d))
-    if isinstance(term, Arith):
-        a, b = _value(term.left, d), _value(term.right, d)
-        return {"+": a + b, "-": a - b, "*": a * b, "/": a / b if b else math.inf}[term.op]
-    raise ValueError(term)
+    """A term of numbers and ``d_exit(o)`` at d_exit = ``d`` [m], folded
+    (:func:`twolevel.stl.analysis.fold_term`; ``ValueError``: it reads more, or does not fold)."""
+    bound = rewrite(term, lambda n: Num(d) if isinstance(n, ParticipantSignal) and n.name == "d_exit" else None)
+    folded = fold_term(bound)
+    if not isinstance(folded, Num):
+        raise ValueError(term)
+    return folded.value
 
 
 def gap_rule(rulesets: Sequence[RuleSet]) -> GapRule:
@@ -111,19 +105,23 @@ def gap_rule(rulesets: Sequence[RuleSet]) -> GapRule:
             for node in rs.formula(r.name).walk():
                 if not isinstance(node, Compare):
                     continue
-                if node.op in (">=", ">") and node.left == ParticipantSignal("t_reach", getattr(node.left, "var", "")):
+                if node.op in (">=", ">") and _is_t_reach(node.left):
                     g = node.right
-                elif node.op in ("<=", "<") and node.right == ParticipantSignal("t_reach", getattr(node.right, "var", "")):
+                elif node.op in ("<=", "<") and _is_t_reach(node.right):
                     g = node.left
                 else:
                     continue
                 try:
                     m, slope, far = _value(g, 0.0), _value(g, 1.0) - _value(g, 0.0), _value(g, 100.0)
-                except (ValueError, ZeroDivisionError):
+                except ValueError:
                     continue
                 if slope > 0 and math.isclose(far, m + 100.0 * slope, rel_tol=1e-9, abs_tol=1e-9):
                     return GapRule(m, 1.0 / slope)
     return GapRule()
+
+
+def _is_t_reach(term: Node) -> bool:
+    return isinstance(term, ParticipantSignal) and term.name == "t_reach"
 
 
 BLOCK_GAP = 2.0
