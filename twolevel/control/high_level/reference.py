@@ -167,20 +167,18 @@ def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, set
     hc = horizon_constants(world, traffic, t, x0, dt=dt, s_pred=s_ref, memory=memory, station=(s0, float(e_arr[0])),
                            ticks=np.asarray(settings.ticks))
     # the reference ends with a stop where the plan must stop: the goal (when the route stops
-    # there) and a stop line / red light a rule guards that full braking can still stop before
+    # there), and a stop line / red light a rule guards or the give-way line while it holds
+    # that full braking can still stop before
     d_brake, v_brake = braking(float(x0[3]), settings.ticks[-1], dt, params)
     s_end = float(route.s[-1]) if stops else math.inf
+    zones = zone_constants(world, hc, s0, settings.H, traffic, float(x0[3]), gap) if gap is not None else None
+    halts = [give_way_line(zones)]
     if any(stop_rules):
         lines = stop_lines(hc, stop=stop_rules[0], light=stop_rules[1])
-        s_near = float(min(lines[0], lines[-1]))
-        if s0 + d_brake <= s_near + 1e-6:
-            s_end = min(s_end, max(s_near - settings.stop_margin, s0))
-    zones = None
-    if gap is not None:
-        zones = zone_constants(world, hc, s0, settings.H, traffic, float(x0[3]), gap)
-        s_give = give_way_line(zones)
-        if s0 + d_brake <= s_give + 1e-6:
-            s_end = min(s_end, max(s_give - settings.stop_margin, s0))
+        halts.append(float(min(lines[0], lines[-1])))
+    for s_halt in halts:
+        if s0 + d_brake <= s_halt + 1e-6:
+            s_end = min(s_end, max(s_halt - settings.stop_margin, s0))
     follow, sides, lateral, lane, oncoming, early = None, (False, False), 0.0, 0.0, False, None
     ticks = np.asarray(settings.ticks)
     times = dt * ticks
