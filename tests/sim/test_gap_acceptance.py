@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from twolevel.monitor.tracefile import read_trace
-from twolevel.sim.engine import simulate_scenario
-from twolevel.verdict.judge import judge_run
+
+from helpers.judged_runs import judged_run
 
 ROOT = Path(__file__).resolve().parents[2]
 LIMIT = 13.89  # [m/s] the map's limit; the car with priority drives at it
@@ -88,11 +88,7 @@ def _run(tmp_path: Path, case: str, gap: float, constants: str = "{}") -> tuple[
                                     limit=LIMIT, rules=ROOT / "rules",
                                     stop=f"\n  - {ROOT / 'rules'}/stop_sign.stl" if stop else "",
                                     stop_rule=", stop_sign" if stop else "", constants=constants))
-    summary, diags = simulate_scenario(str(path), str(tmp_path / "run"), frames=False, ttr_every=0)
-    assert summary is not None and summary.status == "complete", [d.message for d in diags]
-    verdict, _ = judge_run(summary.run_dir, str(path))
-    assert verdict.passed, [c.detail for c in verdict.failed]
-    trace, _ = read_trace(str(Path(summary.run_dir) / "trace.csv"))
+    trace, _ = read_trace(str(judged_run(path, tmp_path / "run") / "trace.csv"))
     assert trace is not None
     c = {k: np.asarray(v, float) for k, v in trace.columns.items()}
     t = np.asarray(trace.t, float)

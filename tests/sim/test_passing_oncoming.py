@@ -17,11 +17,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from twolevel.sim.engine import simulate_scenario
 from twolevel.sim.trace import read_run
-from twolevel.verdict.judge import judge_run
 from twolevel.world.assumptions import opposite_safe_distance
 
+from helpers.judged_runs import judged_run
 from helpers.world_files import load_world
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -54,11 +53,7 @@ class Pass:
 
 def _run(tmp_path: Path, name: str) -> Pass:
     path = EVERYDAY / f"{name}.yaml"
-    summary, diags = simulate_scenario(str(path), str(tmp_path / name), frames=False, ttr_every=0)
-    assert summary is not None and summary.status == "complete", [d.message for d in diags]
-    verdict, _ = judge_run(summary.run_dir, str(path))
-    assert verdict.passed, [c.detail for c in verdict.failed]  # goal, road, collisions, rules
-    run = read_run(summary.run_dir)
+    run = read_run(judged_run(path, tmp_path / name))  # goal, road, collisions, rules
     c = run.columns
     t, x, y, v, over = (np.asarray(c[k], float) for k in ("t", "x", "y", "v", "over_centre"))
     w = load_world(path)

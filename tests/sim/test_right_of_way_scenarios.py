@@ -18,8 +18,8 @@ from typer.testing import CliRunner
 
 from twolevel.cli import app
 from twolevel.monitor.tracefile import read_trace
-from twolevel.sim.engine import simulate_scenario
-from twolevel.verdict.judge import judge_run
+
+from helpers.judged_runs import judged_run
 
 ROOT = Path(__file__).resolve().parents[2]
 TRAFFIC = ROOT / "scenarios" / "traffic"
@@ -39,15 +39,12 @@ def _monitored(trace_csv: Path, c: dict[str, np.ndarray], holds: bool = True) ->
 
 def _run(tmp_path: Path, name: str, holds: bool = True) -> dict[str, np.ndarray]:
     path = TRAFFIC / f"{name}.yaml"
-    summary, diags = simulate_scenario(str(path), str(tmp_path / name), frames=False, ttr_every=0)
-    assert summary is not None and summary.status == "complete", [d.message for d in diags]
-    verdict, _ = judge_run(summary.run_dir, str(path))
-    assert verdict.passed, [c.detail for c in verdict.failed]  # goal, no collision at fault, the rules
-    trace, _ = read_trace(str(Path(summary.run_dir) / "trace.csv"))
+    run_dir = judged_run(path, tmp_path / name)  # goal, no collision at fault, the rules
+    trace, _ = read_trace(str(run_dir / "trace.csv"))
     assert trace is not None
     out = {k: np.asarray(v, float) for k, v in trace.columns.items()}
     out["t"] = np.asarray(trace.t, float)
-    _monitored(Path(summary.run_dir) / "trace.csv", out, holds)
+    _monitored(run_dir / "trace.csv", out, holds)
     return out
 
 
@@ -126,10 +123,8 @@ def test_the_nmpc_baseline_waits_in_its_lane(tmp_path: Path) -> None:
     and with no lateral band the plan slid sideways along the line (7 m off the route, standing
     across the verge); the reference now stops at the line, as at a stop line."""
     path = TRAFFIC / "yield_priority_road.yaml"
-    summary, diags = simulate_scenario(str(path), str(tmp_path / "nmpc"), frames=False, ttr_every=0,
-                                       controller="nmpc", duration=15.0)
-    assert summary is not None and summary.status == "complete", [d.message for d in diags]
-    trace, _ = read_trace(str(Path(summary.run_dir) / "trace.csv"))
+    run_dir = judged_run(path, tmp_path / "nmpc", judge=False, controller="nmpc", duration=15.0)
+    trace, _ = read_trace(str(run_dir / "trace.csv"))
     assert trace is not None
     e, d_zone, v = (np.asarray(trace.columns[k], float) for k in ("e", "d_zone", "v"))
     before = d_zone > 0

@@ -19,11 +19,10 @@ from twolevel.control.high_level.overtaking import (oncoming_band, oncoming_free
                                                     waiting_room)
 from twolevel.models.params import BicycleParams
 from twolevel.safety.failsafe import return_path
-from twolevel.sim.engine import simulate_scenario
-from twolevel.verdict.judge import judge_run
 from twolevel.world.assumptions import ResponseBounds, opposite_safe_distance
 from twolevel.world.signals import horizon_constants
 
+from helpers.judged_runs import judged_run
 from helpers.world_files import load_world
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -94,11 +93,8 @@ def test_return_path_is_smooth_from_start_to_goal(e_from: float, e_out: float, e
 
 def _simulate(tmp_path: Path, name: str) -> tuple[np.ndarray, np.ndarray]:
     path = EVERYDAY / f"{name}.yaml"
-    summary, diags = simulate_scenario(str(path), str(tmp_path / name), frames=False, ttr_every=0)
-    assert summary is not None and summary.status == "complete", [d.message for d in diags]
-    verdict, _ = judge_run(summary.run_dir, str(path))
-    assert verdict.passed, [c.detail for c in verdict.failed]  # goal (as expected), road, collisions, rules
-    data = np.genfromtxt(Path(summary.run_dir) / "trace.csv", delimiter=",", names=True, usecols=("x", "y", "v"))
+    run_dir = judged_run(path, tmp_path / name)  # goal (as expected), road, collisions, rules
+    data = np.genfromtxt(run_dir / "trace.csv", delimiter=",", names=True, usecols=("x", "y", "v"))
     return np.column_stack([data["x"], data["y"]]), data["v"]
 
 
