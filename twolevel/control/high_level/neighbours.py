@@ -28,8 +28,8 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from twolevel.stl.analysis import PRESENT, participant_key, split_participant_key
-from twolevel.world.provided import PARTICIPANT_ABSENT
+from twolevel.control.high_level.right_of_way import participant_pasts
+from twolevel.stl.analysis import participant_key
 from twolevel.world.relations import relations
 from twolevel.world.signals import HorizonConstants
 from twolevel.world.world import World
@@ -93,33 +93,22 @@ def neighbour_signals_over(nc: NeighbourConstants | None, names: frozenset[str] 
     now, k = 1..H): ``ahead(past, c)`` is the affine signal c − s_k, ``behind(past, c)`` s_k − c,
     ``left(past, c)`` c − e_k; ``hist(name, now)``: the recorded past of ``name`` then ``now``
     (what is not recorded reads as absent)."""
-    wanted = [split_participant_key(nm) for nm in names]
-    wanted = [w[0] for w in wanted if w is not None and w[1] == "*" and w[0] in NEIGHBOUR_SIGNALS]
-    if nc is None or not wanted:
+    if nc is None:
         return {}
-
-    def past(key: str, absent: float) -> np.ndarray:
-        h = hist(key, absent)[:-1]
-        return np.concatenate([np.full(P - len(h), absent), h])
-
-    out: dict[str, object] = {}
+    present, rows = participant_pasts(nc.ids, names, NEIGHBOUR_SIGNALS, H, P, hist)
+    out: dict[str, object] = dict(present)
     build: Mapping[str, tuple[Affine, np.ndarray]] = {"d_lon": (ahead, nc.lon), "d_behind": (behind, nc.behind),
                                                       "left_of": (left, nc.left)}
-    for j, pid in enumerate(nc.ids):
-        key = participant_key(PRESENT, pid)
-        out[key] = np.concatenate([past(key, -np.inf), np.full(H + 1, np.inf)])
-        for name in wanted:
-            key = participant_key(name, pid)
-            pst = past(key, PARTICIPANT_ABSENT[name])
-            if name == "v":
-                out[key] = np.concatenate([pst, nc.v[j]])
-                continue
-            make, c = build[name]
-            row = c[j]
-            if not np.isfinite(row).any():  # left_of of a vehicle not running the route's way
-                out[key] = np.concatenate([pst, row])
-            else:  # one that turns within the horizon: far to the right there, finite for the encoding
-                out[key] = make(pst, np.maximum(row, -FAR))
+    for j, name, key, pst in rows:
+        if name == "v":
+            out[key] = np.concatenate([pst, nc.v[j]])
+            continue
+        make, c = build[name]
+        row = c[j]
+        if not np.isfinite(row).any():  # left_of of a vehicle not running the route's way
+            out[key] = np.concatenate([pst, row])
+        else:  # one that turns within the horizon: far to the right there, finite for the encoding
+            out[key] = make(pst, np.maximum(row, -FAR))
     return out
 
 

@@ -58,7 +58,7 @@ from twolevel.world.traffic import TrafficState
 from twolevel.world.world import World
 
 __all__ = ["RUN_UP", "CLEAR_ACCEL", "BLOCK_GAP", "GapRule", "gap_rule", "ZoneConstants", "zone_constants",
-           "give_way_line", "zone_signals_over", "MPC_ZONE_PATTERNS"]
+           "give_way_line", "zone_signals_over", "recorded_past", "participant_pasts", "MPC_ZONE_PATTERNS"]
 
 RUN_UP = 1.0
 """[m] How far before a conflict area the ego waits for a gap (its front); from there it moves off
@@ -217,27 +217,46 @@ def zone_signals_over(zc: ZoneConstants | None, names: frozenset[str] | set[str]
     not recorded reads as absent)."""
     zc = zc or ZoneConstants()
     out: dict[str, object] = {}
-
-    def past(name: str, now: float, absent: float) -> np.ndarray:
-        h = hist(name, now)[:-1]
-        return np.concatenate([np.full(P - len(h), absent), h])
-
     for name, c, none in (("d_zone", zc.s_in - zc.length / 2, np.inf),
                           ("d_zone_out", zc.s_out + zc.length / 2, -np.inf)):
         if name in names:
-            pst = past(name, none, none)
+            pst = recorded_past(hist, P, name, none)
             out[name] = route_s(pst, c) if math.isfinite(c) else np.concatenate([pst, np.full(H + 1, none)])
-    wanted = [split_participant_key(nm) for nm in names]
-    wanted = [w[0] for w in wanted if w is not None and w[1] == "*" and w[0] in ZONE_PARTICIPANT_SIGNALS]
-    if wanted:
-        for j, pid in enumerate(zc.ids):
-            key = participant_key(PRESENT, pid)
-            out[key] = np.concatenate([past(key, np.inf, -np.inf), np.full(H + 1, np.inf)])
-            for name in wanted:
-                key = participant_key(name, pid)
-                row = zc.values[name][j] if name in zc.values else np.full(H + 1, PARTICIPANT_ABSENT[name])
-                if name == "d_exit" and np.isfinite(row).any():  # c − s_k: where the ego leaves o's way
-                    out[key] = route_s(past(key, -np.inf, -np.inf), float(np.max(row[np.isfinite(row)])) + zc.s0)
-                else:
-                    out[key] = np.concatenate([past(key, float(row[0]), PARTICIPANT_ABSENT[name]), row])
+    present, rows = participant_pasts(zc.ids, names, ZONE_PARTICIPANT_SIGNALS, H, P, hist)
+    out.update(present)
+    for j, name, key, pst in rows:
+        row = zc.values[name][j] if name in zc.values else np.full(H + 1, PARTICIPANT_ABSENT[name])
+        if name == "d_exit" and np.isfinite(row).any():  # c − s_k: where the ego leaves o's way
+            out[key] = route_s(pst, float(np.max(row[np.isfinite(row)])) + zc.s0)
+        else:
+            out[key] = np.concatenate([pst, row])
     return out
+
+
+def recorded_past(hist: Callable[[str, float], np.ndarray], P: int, key: str, absent: float) -> np.ndarray:
+    """(P,) The samples of ``key`` before now (``hist(key, now)``: the recorded past then
+    ``now``), ``absent`` where none is recorded."""
+    h = hist(key, absent)[:-1]
+    return np.concatenate([np.full(P - len(h), absent), h])
+
+
+def participant_pasts(ids: Sequence[str], names: frozenset[str] | set[str], signals: Sequence[str], H: int, P: int,
+                      hist: Callable[[str, float], np.ndarray]
+                      ) -> tuple[dict[str, np.ndarray], list[tuple[int, str, str, np.ndarray]]]:
+    """For the participant signals of ``signals`` that ``names`` read of every participant
+    (``name[*]``), when any: ``present[ID]`` of each of ``ids`` over the trace (its recorded past,
+    then +inf over the H+1 steps), and (j, name, key, past) for each participant j and signal
+    name: its column ``key`` and its P recorded samples (absent: the signal's absent value) that
+    the caller's horizon rows follow."""
+    wanted = [split_participant_key(nm) for nm in names]
+    wanted = [w[0] for w in wanted if w is not None and w[1] == "*" and w[0] in signals]
+    if not wanted:
+        return {}, []
+    present, rows = {}, []
+    for j, pid in enumerate(ids):
+        key = participant_key(PRESENT, pid)
+        present[key] = np.concatenate([recorded_past(hist, P, key, -np.inf), np.full(H + 1, np.inf)])
+        for name in wanted:
+            key = participant_key(name, pid)
+            rows.append((j, name, key, recorded_past(hist, P, key, PARTICIPANT_ABSENT[name])))
+    return present, rows
