@@ -29,8 +29,7 @@ import numpy as np
 
 from twolevel.world.geometry import LaneSet, Route, step_index
 
-__all__ = ["Area", "CentreLine", "drivable_area", "route_lanes_at", "centre_line", "over_centre",
-           "overtaking_signals"]
+__all__ = ["Area", "CentreLine", "drivable_area", "route_lanes_at", "centre_line", "overtaking_signals"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -139,21 +138,15 @@ def centre_line(lanes: LaneSet, route: Route, s: np.ndarray, *, max_lanes: int =
     return CentreLine(found_at, solid, lanes.no_overtaking.contains(lane, s_lane))
 
 
-def over_centre(line: CentreLine, e: np.ndarray, width: float) -> np.ndarray:
-    """The ``over_centre`` signal [m]: how far a body of ``width`` [m] at lateral offset ``e`` [m]
-    (+ left of the route) reaches over the centre line ``line`` (< 0 while inside; −inf where no
-    oncoming lane lies to the left). The body's half-width is taken across the route (its heading
-    relative to the route is left out: affine in e, as the MPC encodes it)."""
-    return np.asarray(e, dtype=float) + 0.5 * width - line.offset
-
-
-def overtaking_signals(lanes: LaneSet, route: Route, s: np.ndarray, e: np.ndarray, width: float
+def overtaking_signals(lanes: LaneSet, route: Route, s: np.ndarray, e: np.ndarray | float, width: float
                        ) -> dict[str, np.ndarray]:
     """The signals ``over_centre`` [m], ``solid_left`` and ``no_overtaking`` (1/0) of an ego of
     ``width`` [m] at route coordinates ``s``, ``e`` [m] (any shape, broadcast; the shape kept):
-    :mod:`twolevel.world.provided`."""
+    :mod:`twolevel.world.provided`. ``over_centre`` = e + width/2 − the centre line's offset: the
+    body's half-width taken across the route (its heading relative to the route left out: affine
+    in e, as the MPC encodes it)."""
     s, e = np.broadcast_arrays(np.asarray(s, dtype=float), np.asarray(e, dtype=float))
     line = centre_line(lanes, route, np.clip(s, 0.0, route.length).ravel())
-    return {"over_centre": over_centre(line, e.ravel(), width).reshape(s.shape),
+    return {"over_centre": (e.ravel() + 0.5 * width - line.offset).reshape(s.shape),
             "solid_left": line.solid.astype(float).reshape(s.shape),
             "no_overtaking": line.no_overtaking.astype(float).reshape(s.shape)}

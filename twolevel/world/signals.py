@@ -52,7 +52,7 @@ import numpy as np
 
 from twolevel.models.obb import box_corners, box_separation
 from twolevel.stl.analysis import PRESENT, participant_key
-from twolevel.world.area import centre_line, overtaking_signals
+from twolevel.world.area import overtaking_signals
 from twolevel.world.assumptions import ResponseBounds, safe_distance
 from twolevel.world.geometry import Route
 from twolevel.world.provided import PARTICIPANT_SIGNALS, PROVIDED_SIGNALS
@@ -410,9 +410,8 @@ def horizon_constants(
 
 def route_lookups(world: World, s_ref: np.ndarray) -> dict[str, np.ndarray]:
     """What :class:`HorizonConstants` looks up at the predicted route positions ``s_ref``
-    (H+1,) [m]: ``v_max`` [m/s], ``over_offset`` [m], ``solid_left`` and ``no_overtaking`` (1/0)
-    — replace them all together when the reference's positions change."""
-    route = world.route
-    line = centre_line(world.lanes, route, np.clip(s_ref, 0.0, route.length))
-    return {"v_max": route.limit_at(s_ref).astype(float), "over_offset": 0.5 * world.ego.width - line.offset,
-            "solid_left": line.solid.astype(float), "no_overtaking": line.no_overtaking.astype(float)}
+    (H+1,) [m]: ``v_max`` [m/s], ``over_offset`` [m] (``over_centre`` at e = 0), ``solid_left`` and
+    ``no_overtaking`` (1/0) — replace them all together when the reference's positions change."""
+    at = overtaking_signals(world.lanes, world.route, s_ref, 0.0, world.ego.width)
+    return {"v_max": world.route.limit_at(s_ref).astype(float), "over_offset": at["over_centre"],
+            "solid_left": at["solid_left"], "no_overtaking": at["no_overtaking"]}
