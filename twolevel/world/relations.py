@@ -104,7 +104,7 @@ def relations(route: Route, ego: Mapping[str, np.ndarray], ego_box: tuple[float,
     free = np.where(others_near, between, np.inf).min(axis=-1, initial=np.inf)
     out["precedes"] = np.minimum(np.minimum(same, out["d_lon"]), free)
     # the ego's box along the route here (its heading left out: affine in s and e)
-    out["d_behind"] = (s - 0.5 * ego_box[0]) - (so + lo_)
+    out["d_behind"] = (s - 0.5 * ego_box[0]) - front
     out["left_of"] = np.where(same_way(tho, 0.0), (eo - ho) - (e + 0.5 * ego_box[1]), -np.inf)
     with np.errstate(invalid="ignore"):
         return {name: np.where(near, val, PARTICIPANT_ABSENT[name]) for name, val in out.items()}
