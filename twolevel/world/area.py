@@ -124,14 +124,14 @@ def centre_line(lanes: LaneSet, route: Route, s: np.ndarray, *, max_lanes: int =
     solid = np.zeros(len(s), dtype=bool)
     alive = np.ones(len(s), dtype=bool)
     for _ in range(max_lanes):
-        if not alive.any():
-            break
         nb, nb_s = lanes.beside(cur, cur_s, True)
         here = alive & (nb >= 0)
         against = here & ~lanes.adj_left_same[cur]
         found_at = np.where(against, offset, found_at)
         solid = np.where(against, ~lanes.markings.crossable(cur, cur_s, True), solid)
         alive = here & ~against
+        if not alive.any():  # every position has found its line or run out of lanes: no width to add
+            break
         nbi = np.maximum(nb, 0)
         offset = np.where(alive, offset + lanes.width_at(nbi, np.where(alive, nb_s, 0.0)), offset)
         cur, cur_s = np.where(alive, nbi, cur), np.where(alive, nb_s, cur_s)
