@@ -16,7 +16,7 @@ at-fault collisions, goals missed, runs over the time targets. Run directories g
 (default a temporary folder). Prints figures; not a test.
 
     python benchmarks/closed_loop.py [--suite] [--controllers twolevel,nmpc,reckless] [--no-safety]
-                                     [--no-monitor] [--duration S] [scenario ...]
+                                     [--no-monitor] [--duration S] [scenario | path/to/scenario.yaml ...]
 """
 
 from __future__ import annotations
@@ -71,6 +71,8 @@ def _load() -> str:
 
 
 def _path(name: str) -> Path:
+    if name.endswith(".yaml"):  # a scenario file given by its path
+        return Path(name).resolve()
     if name in RIGHT_OF_WAY:
         return ROOT / "scenarios" / "traffic" / f"{name}.yaml"
     return ROOT / "scenarios" / (f"{name}.yaml" if name in SCENARIOS else f"everyday/{name}.yaml")
@@ -128,11 +130,11 @@ def main() -> None:
     faults = runs = missed = failed = over_p99 = over_max = over_p99_cpu = over_max_cpu = 0
     for name in names:
         for ctrl in ctrls:
-            run_dir = out / f"{name}_{ctrl}"
+            run_dir = out / f"{Path(name).stem}_{ctrl}"
             s, diags = simulate_scenario(str(_path(name)), str(run_dir), monitor=not args.no_monitor,
                                          safety=not args.no_safety, controller=ctrl, duration=args.duration,
                                          frames=False)
-            label = f"{name} / {ctrl}"
+            label = f"{Path(name).stem if name.endswith('.yaml') else name} / {ctrl}"
             if s is None:
                 print(f"{label:<32} failed: " + "; ".join(d.message for d in diags if d.is_error), flush=True)
                 continue
