@@ -47,7 +47,8 @@ from twolevel.models.params import VehicleParams
 from twolevel.models.rollout import Backend, rollout
 from twolevel.world.geometry import Route
 
-__all__ = ["FailSafeSettings", "Manoeuvre", "FailSafe", "manoeuvres", "roll", "brake_rate", "return_path", "FULL"]
+__all__ = ["FailSafeSettings", "Manoeuvre", "FailSafe", "manoeuvres", "roll", "brake_rate", "return_path", "catch_up",
+           "FULL"]
 
 FULL = math.inf
 """Deceleration level meaning full braking (γ = −1)."""
@@ -137,18 +138,19 @@ class FailSafe:
 
 
 def manoeuvres(settings: FailSafeSettings, zones: np.ndarray, s0: float, v0: float, brake_full: float,
-               back: tuple[float, float, float] | None = None) -> list[Manoeuvre]:
+               back: tuple[float, ...] | None = None) -> list[Manoeuvre]:
     """The manoeuvres to try from route position ``s0`` [m] at speed ``v0`` [m/s], in order:
     each braking level, then clearing the first conflict zone (``zones`` (Z, 2) [m] of the centre)
     that the car is in or cannot be sure to stop before (its gentlest braking distance reaches
     it), with ``brake_full`` [m/s²] the full-braking deceleration. ``back`` = (e_goal [m], s_past
-    [m], e_beside [m]): the car is out of the route's lane (on the oncoming lane, passing): every
-    braking level steers back to lateral offset e_goal while it brakes (behind what it passes),
-    a creep at 1 m/s² steers back over the length the steering limit needs, and, when s_past is
-    finite (the route position its centre must pass to be ahead of what it passes), it also
-    completes the pass: keeps its speed (or gains some) while it moves out to e_beside (beside
-    what it passes) and past s_past, steers back over the distance a lateral acceleration of
-    ``settings.a_lat_max``/2 needs, then brakes."""
+    [m], e_beside [m][, v_past [m/s]]): the car is out of the route's lane (on the oncoming lane,
+    passing): every braking level steers back to lateral offset e_goal while it brakes (behind
+    what it passes), a creep at 1 m/s² steers back over the length the steering limit needs, and,
+    when s_past is finite (the route position its centre must pass now to be ahead of what it
+    passes, which drives on at up to v_past along the route, 0 when omitted), it also completes
+    the pass: keeps its speed (or gains some) while it moves out to e_beside (beside what it
+    passes) and past where it catches up with s_past (:func:`catch_up`), steers back over the
+    distance a lateral acceleration of ``settings.a_lat_max``/2 needs, then brakes."""
     if back is not None:
         return _returning(settings, s0, v0, brake_full, *back)
     out = [Manoeuvre(d) for d in settings.decels]
@@ -181,12 +183,32 @@ def _moves(accel: float, v0: float, distance: float, max_time: float) -> bool:
     return accel > 0 or (v0 >= KEEP_MIN and distance <= v0 * max_time)
 
 
+def catch_up(s0: float, v0: float, accel: float, s_past: float, v_past: float) -> float:
+    """[m] Where a car at route position ``s0`` [m] and speed ``v0`` [m/s], holding ``accel``
+    [m/s²] (≥ 0), draws level with a point now at ``s_past`` [m] that moves on at ``v_past``
+    [m/s] (a vehicle being passed, which does not speed up: ahead of it by as much as s_past is
+    ahead of it now); ``s_past`` itself when it stands or the car is already there; +inf when the
+    car never gets there (no faster than the point, gaining no speed)."""
+    gap = s_past - s0
+    if gap <= 0.0 or v_past <= 0.0:
+        return max(s_past, s0)
+    dv = v0 - v_past
+    if accel > 0.0:
+        t = (-dv + math.sqrt(dv * dv + 2.0 * accel * gap)) / accel
+    elif dv > 0.0:
+        t = gap / dv
+    else:
+        return math.inf
+    return s_past + v_past * t
+
+
 def _returning(settings: FailSafeSettings, s0: float, v0: float, brake_full: float, e_goal: float,
-               s_past: float, e_beside: float) -> list[Manoeuvre]:
+               s_past: float, e_beside: float, v_past: float = 0.0) -> list[Manoeuvre]:
     """:func:`manoeuvres` for a car out of the route's lane (its ``back``): the gentlest and the
     full braking level, the creep, and completing the pass at the speed it has (at
     :data:`KEEP_MIN` or more, when that gets it there in time: :func:`_moves`) or gaining 1.5
-    m/s², braking gently after — completing first when the car is already out beside what it
+    m/s², returning where it has caught up with what it passes (``v_past`` [m/s] its speed,
+    :func:`catch_up`), braking gently after — completing first when the car is already out beside what it
     passes (the likeliest to pass verification, tried alone first; few manoeuvres, since each is
     rolled out in half-second closed-loop segments)."""
     levels = sorted({min(settings.decels), max(settings.decels)}) if settings.decels else [brake_full]
@@ -198,12 +220,13 @@ def _returning(settings: FailSafeSettings, s0: float, v0: float, brake_full: flo
     if math.isfinite(s_past):
         v = max(v0, PASS_PACE)
         d_ret = v * math.sqrt(6.0 * 3.5 / (0.5 * settings.a_lat_max))  # a lane's width back
-        start = max(s_past, s0)
-        d_out = min(d_ret, max(0.6 * (start - s0), 0.5))  # out beside it before its rear
         brake = min(settings.clear_brakes) if settings.clear_brakes else levels[0]
-        complete = [Manoeuvre(brake, a, start + d_ret, e_goal, start, d_ret, e_beside, s0, d_out)
-                    for a in sorted({0.0, max(settings.clear_accels, default=0.0)})
-                    if _moves(a, v0, start + d_ret - s0, settings.max_time)]
+        complete = []
+        for a in sorted({0.0, max(settings.clear_accels, default=0.0)}):
+            start = catch_up(s0, v0, a, s_past, v_past)
+            if math.isfinite(start) and _moves(a, v0, start + d_ret - s0, settings.max_time):
+                d_out = min(d_ret, max(0.6 * (max(s_past, s0) - s0), 0.5))  # out beside it before its rear
+                complete.append(Manoeuvre(brake, a, start + d_ret, e_goal, start, d_ret, e_beside, s0, d_out))
         out = complete + out if abs(e_beside - e_goal) > 0 and v0 > 1.0 else out + complete
     return out
 

@@ -63,6 +63,7 @@ from twolevel.safety.failsafe import FailSafe, FailSafeSettings, brake_rate, man
 from twolevel.safety.network import FOREIGN_TOLERANCE, Network, network_of
 from twolevel.safety.occupancy import Intervals, Occupancy, kind_flags, lane_of, predict
 from twolevel.world.area import drivable_area
+from twolevel.world.clearance import passing_clearance
 from twolevel.world.traffic import TrafficState
 from twolevel.world.world import World
 
@@ -238,23 +239,22 @@ def _excluded(ctx: Context, traffic: TrafficState, s_ego: float, e_ego: float) -
 PASS_REACH = 60.0
 """[m] How far ahead of the ego a vehicle in its lane may be and still be the one it is passing."""
 
-PASS_CLEARANCE = 0.5
-"""[m] Lateral clearance between the bodies of a fail-safe that completes a pass and what it passes."""
-
 
 def _same(a: np.ndarray | None, b: np.ndarray | None) -> bool:
     return (a is None and b is None) or (a is not None and b is not None and np.array_equal(a, b))
 
 
 def _back(ctx: Context, traffic: TrafficState, s_ego: float, e_ego: float, psi: float
-          ) -> tuple[float, float, float, np.ndarray] | None:
+          ) -> tuple[float, float, float, float, np.ndarray] | None:
     """Where a fail-safe must take the ego back to, when at route position ``s_ego`` [m] its
     lateral offset ``e_ego`` [m] and heading ``psi`` [rad] put its box so far out of the route's
     lane (and the lanes running its way) that standing there would be standing on another lane:
     (lateral offset of the route lane's centre [m], route position its centre must pass to be
     ahead of the vehicles in the route's lane it is beside or passing, within
     :data:`PASS_REACH`, with D_safe to spare, −inf when there are none; the lateral offset [m]
-    beside them on the ego's side, with :data:`PASS_CLEARANCE`, NaN when none; which
+    beside them on the ego's side, with the clearance each is owed
+    (:func:`twolevel.world.clearance.passing_clearance`), NaN when none; the fastest of
+    their speeds along the route [m/s] (0 when none: they may drive on at up to it); which
     participants (N,) they are: being overtaken, they do not speed up — the Vienna Convention on
     Road Traffic, art. 11(3), as the assumptions state, :mod:`twolevel.world.assumptions`). None: it
     is in its lane."""
@@ -270,7 +270,7 @@ def _back(ctx: Context, traffic: TrafficState, s_ego: float, e_ego: float, psi: 
     lo, hi = lo + clear, hi - clear
     if lo > hi:
         return None
-    s_past, e_beside = -math.inf, math.nan
+    s_past, e_beside, v_past = -math.inf, math.nan, 0.0
     passed = np.zeros(len(traffic.x), dtype=bool)
     side = 1.0 if e_ego >= 0 else -1.0
     idx = np.flatnonzero(traffic.active)
@@ -282,11 +282,14 @@ def _back(ctx: Context, traffic: TrafficState, s_ego: float, e_ego: float, psi: 
                   & (s_i - s_ego < PASS_REACH))
         if beside.any():
             s_past = float(np.max(s_i[beside] + length[beside] / 2)) + w.ego.length / 2 + w.settings.D_safe
-            reach = e_i[beside] + side * (0.5 * (w.parts.width[idx][beside] + ctx.params.width) + PASS_CLEARANCE)
+            owed = passing_clearance(w.parts.user[idx][beside], float(w.route.limit_at(s_ego)))
+            reach = e_i[beside] + side * (0.5 * (w.parts.width[idx][beside] + ctx.params.width) + owed)
             out = half + 0.5 * ctx.params.width + m + 0.25  # wholly out of the lane (its occupancy spans it)
             e_beside = float(side * max(float(np.max(side * reach)), out))
+            along = traffic.v[idx][beside] * np.cos(traffic.psi[idx][beside] - w.route.heading_at(s_i[beside]))
+            v_past = max(float(np.max(along)), 0.0)
             passed[idx[beside]] = True
-    return min(max(0.0, lo), hi), s_past, e_beside, passed
+    return min(max(0.0, lo), hi), s_past, e_beside, v_past, passed
 
 
 @dataclass(frozen=True, eq=False)
@@ -463,11 +466,11 @@ def _verify(ctx: Context, x_start: np.ndarray, prefix: np.ndarray, traffic: Traf
     now = _route_state(ctx, prefix[0], s_hint) if len(prefix) else (s, e)
     follower, protected = _excluded(ctx, traffic, *now)
     back = _back(ctx, traffic, s, e, float(x_start[2]))
-    hold = None if back is None else back[3]
+    hold = None if back is None else back[4]
     if pred is None or not np.array_equal(pred.include, ~follower) or not _same(pred.hold, hold):
         pred = _Prediction(~follower, hold)
     plan = manoeuvres(st.failsafe, ctx.network.zones, s, max(float(x_start[3]), 0.0), ctx.brake_full,
-                      None if back is None else back[:3])
+                      None if back is None else back[:4])
     refuted: list[Refutation] = []
     for batch in (plan[:1], plan[1:]):  # the gentlest alone (usually enough), then the others together
         if not batch:

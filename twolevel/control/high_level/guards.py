@@ -55,13 +55,10 @@ from twolevel.world.signals import HorizonConstants
 from twolevel.world.world import World
 
 __all__ = ["stop_lines", "can_stop_slope", "TerminalStop", "terminal_stop", "drivable_band", "RssTerminal",
-           "rss_terminal", "free_sides", "beside_steps", "BESIDE_FROM", "Pass", "Front", "front_of", "chord", "CHORD_HALF_WIDTH", "LATERAL_MARGIN"]
+           "rss_terminal", "free_sides", "beside_steps", "BESIDE_FROM", "Pass", "Front", "front_of", "chord", "CHORD_HALF_WIDTH"]
 
 CHORD_HALF_WIDTH = 0.5
 """[m/s] w: half the width of the chord of RSS's distance around the linearisation's speed."""
-
-LATERAL_MARGIN = 0.5
-"""[m] Beside the vehicle ahead means the centres at least half the two widths and this apart."""
 
 BESIDE_FROM = 2.0
 """[s] A plan that passes the vehicle ahead is beside it (in the next lane) from this long after

@@ -17,7 +17,7 @@ from typing import Sequence
 
 import numpy as np
 
-from twolevel.control.high_level.guards import (BESIDE_FROM, LATERAL_MARGIN, Front, Pass, beside_steps,
+from twolevel.control.high_level.guards import (BESIDE_FROM, Front, Pass, beside_steps,
                                                 drivable_band, free_sides, front_of, stop_lines)
 from twolevel.control.high_level.neighbours import left_leader
 from twolevel.control.high_level.overtaking import (lateral_due, lateral_share, oncoming_band, oncoming_free, out_of_lane,
@@ -27,6 +27,7 @@ from twolevel.control.high_level.settings import MPCSettings
 from twolevel.control.high_level.steering import steering_reference
 from twolevel.models.params import BicycleParams
 from twolevel.world.assumptions import ResponseBounds, safe_speed
+from twolevel.world.clearance import passing_clearance
 from twolevel.world.geometry import Route
 from twolevel.world.signals import HorizonConstants, StopMemory, horizon_constants, route_lookups
 from twolevel.world.traffic import TrafficState
@@ -188,7 +189,9 @@ def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, set
     due = BESIDE_FROM if passing is None else passing.by - t
     beside = beside_steps(times, due)
     if front is not None:
-        lateral = 0.5 * (world.ego.width + front.width) + LATERAL_MARGIN
+        # beside it with the clearance its kind of road user is owed (a cyclist 1.5 m, 2 m out of town)
+        lateral = 0.5 * (world.ego.width + front.width) + passing_clearance(int(world.parts.user[front.index]),
+                                                                            float(route.limit_at(s0)))
         lo, hi = drivable_band(world, s_ref[beside])
         sides = free_sides(world, hc, front, lateral=lateral, band=(float(lo.max()), float(hi.min())),
                            s=s_ref[beside], v=v_ref[beside], t=times[beside])
