@@ -460,18 +460,41 @@ def _verify(ctx: Context, x_start: np.ndarray, prefix: np.ndarray, traffic: Traf
             s_hint: float | None, tm: dict[str, float], pred: _Prediction | None
             ) -> tuple[FailSafe | None, list[Refutation], _Prediction]:
     """Try the fail-safes from ``x_start`` after the ``prefix`` states (from the verification time
-    on); the first that passes. Followers and cut-ins are judged where the ego is now."""
-    w, st = ctx.world, ctx.settings
+    on); the first that passes. Followers and cut-ins are judged where the ego is now. A car in
+    its lane whose braking would leave it standing over the lane's edge (pulling out: its heading
+    and steering carry it on sideways while it stops) counts as out of it, as where it would
+    stand shows (:func:`_back` there): the fail-safes that steer back or complete the pass are
+    tried then."""
     s, e = _route_state(ctx, x_start, s_hint)
     now = _route_state(ctx, prefix[0], s_hint) if len(prefix) else (s, e)
     follower, protected = _excluded(ctx, traffic, *now)
     back = _back(ctx, traffic, s, e, float(x_start[2]))
+    fs, refuted, pred, stood = _first_safe(ctx, x_start, prefix, traffic, t, tm, pred, follower, protected, s, back)
+    if fs is None and back is None and stood is not None:
+        s_at, e_at = _route_state(ctx, stood, s)
+        back = _back(ctx, traffic, s_at, e_at, float(stood[2]))
+        if back is not None:
+            fs, more, pred, _ = _first_safe(ctx, x_start, prefix, traffic, t, tm, pred, follower, protected, s, back)
+            refuted += more
+    return fs, refuted, pred
+
+
+def _first_safe(ctx: Context, x_start: np.ndarray, prefix: np.ndarray, traffic: TrafficState, t: float,
+                tm: dict[str, float], pred: _Prediction | None, follower: np.ndarray, protected: frozenset[int],
+                s: float, back: tuple[float, float, float, float, np.ndarray] | None
+                ) -> tuple[FailSafe | None, list[Refutation], _Prediction, np.ndarray | None]:
+    """:func:`_verify`'s trial of the manoeuvres for the ego at route position ``s`` [m] (``back``:
+    :func:`_back`'s): the first fail-safe that passes, the refutations of those before it, the
+    prediction (reused when its participants and holds are the same) and the state where the
+    first fail-safe refuted for standing on another lane stands (None: none was)."""
+    w, st = ctx.world, ctx.settings
     hold = None if back is None else back[4]
     if pred is None or not np.array_equal(pred.include, ~follower) or not _same(pred.hold, hold):
         pred = _Prediction(~follower, hold)
     plan = manoeuvres(st.failsafe, ctx.network.zones, s, max(float(x_start[3]), 0.0), ctx.brake_full,
                       None if back is None else back[:4])
     refuted: list[Refutation] = []
+    stood: np.ndarray | None = None
     for batch in (plan[:1], plan[1:]):  # the gentlest alone (usually enough), then the others together
         if not batch:
             continue
@@ -492,10 +515,12 @@ def _verify(ctx: Context, x_start: np.ndarray, prefix: np.ndarray, traffic: Traf
             why = _judge(ctx, occ, sw, fs, checked)
             if why is None:
                 tm["check"] = tm.get("check", 0.0) + (time.perf_counter() - t0) * 1e3
-                return fs, refuted, pred
+                return fs, refuted, pred, stood
+            if why.reason == "standstill" and stood is None:
+                stood = fs.states[-1]
             refuted.append(why)
         tm["check"] = tm.get("check", 0.0) + (time.perf_counter() - t0) * 1e3
-    return None, refuted, pred
+    return None, refuted, pred, stood
 
 
 def _verdict(ctx: Context, fs: FailSafe | None, refuted: list[Refutation], pred: _Prediction, tm: dict[str, float],
