@@ -14,8 +14,8 @@ from helpers.safety_worlds import ego_on, world
 from twolevel.models import fourwheel as fw
 from twolevel.models.params import VehicleParams
 from twolevel.models.rollout import rollout
-from twolevel.safety.failsafe import (FULL, KEEP_MIN, FailSafeSettings, Manoeuvre, _roll_live, brake_rate, manoeuvres,
-                                      return_path, roll)
+from twolevel.safety.failsafe import (FULL, KEEP_MIN, MIN_GAIN, FailSafeSettings, Manoeuvre, _roll_live, brake_rate,
+                                      catch_up, manoeuvres, return_path, roll)
 from twolevel.safety.network import network_of
 from twolevel.safety.verify import ego_params
 
@@ -72,22 +72,49 @@ def test_no_clearing_without_a_zone_in_reach():
 
 
 @settings(max_examples=200, deadline=None)
-@given(v0=st.floats(0.0, 15.0), ahead=st.floats(0.0, 300.0))
-def test_completing_a_pass_at_its_speed_only_at_a_pace_that_gets_there(v0, ahead):
+@given(v0=st.floats(0.0, 15.0), ahead=st.floats(0.0, 300.0), e_now=st.floats(-0.5, 3.0))
+def test_completing_a_pass_at_its_speed_only_at_a_pace_that_gets_there(v0, ahead, e_now):
     """A car out of its lane beside what it passes completes the pass keeping its speed only at
     KEEP_MIN or more and when that gets it past within max_time (a crawl would not brake before
     its time is up: its rollout ran to max_time in half-second segments, to fail; a pull-out from
-    rest at 2 m/s does get there and is what verifies it); gaining speed, creeping back and braking
-    back into the lane are always tried."""
+    rest at 2 m/s does get there and is what verifies it); creeping back and braking back into
+    the lane are always tried. It gains speed at most at the settings' clearing acceleration and
+    only as much as lets its way out beside the vehicle (from e_now to 3 m) keep within half the
+    lateral acceleration bound at the speed it has at its end (regression: gaining 1.5 m/s² from
+    2 m/s it reached 5.5 m/s on a way out laid out for 3 m/s, swung back into the lane of the
+    stalled car it was passing, and the pull-out was refuted)."""
     fs = FailSafeSettings()
     s0 = 50.0
-    plan = manoeuvres(fs, np.zeros((0, 2)), s0, v0, 9.0, (0.0, s0 + ahead, 3.0))
+    plan = manoeuvres(fs, np.zeros((0, 2)), s0, v0, 9.0, (0.0, s0 + ahead, 3.0, 0.0, e_now))
     keep = [m for m in plan if m.clear_accel == 0.0]
-    gain = [m for m in plan if m.clear_accel is not None and m.clear_accel > 1.0]
-    assert len(gain) == 1 and sum(m.clear_accel == 1.0 for m in plan) == 1  # the creep
+    gain = [m for m in plan if m.clear_accel is not None and m.clear_accel != 0.0 and not math.isnan(m.e_out)]
+    assert sum(m.clear_accel == 1.0 and math.isnan(m.e_out) for m in plan) == 1  # the creep
     assert {m.decel for m in plan if m.clear_accel is None} == {min(fs.decels), max(fs.decels)}
-    distance = gain[0].s_clear - s0
-    assert len(keep) == (1 if v0 >= KEEP_MIN and distance <= v0 * fs.max_time else 0)
+    assert len(gain) <= 1
+    for m in gain:
+        assert MIN_GAIN <= m.clear_accel <= max(fs.clear_accels)
+        v_end = math.sqrt(v0**2 + 2 * m.clear_accel * m.d_out)
+        assert v_end**2 * 6 * abs(m.e_out - e_now) / m.d_out**2 <= 0.5 * fs.a_lat_max + 1e-6
+    d_ret = max(v0, 3.0) * math.sqrt(6 * 3.5 / (0.5 * fs.a_lat_max))
+    assert len(keep) == (1 if v0 >= KEEP_MIN and ahead + d_ret <= v0 * fs.max_time else 0)
+
+
+@settings(max_examples=300, deadline=None)
+@given(s0=st.floats(0.0, 100.0), v0=st.floats(0.0, 20.0), accel=st.sampled_from([0.0, 0.5, 1.5]),
+       gap=st.floats(-20.0, 100.0), v_past=st.one_of(st.just(0.0), st.floats(0.1, 15.0)))
+def test_a_completing_pass_returns_where_it_has_caught_up(s0, v0, accel, gap, v_past):
+    """catch_up: where the car, holding its acceleration, is level with a point that drives on at
+    v_past from gap ahead of it — the point is there at that moment; behind the car or standing,
+    the point itself; never, when the car is no faster and gains nothing."""
+    at = catch_up(s0, v0, accel, s0 + gap, v_past)
+    if gap <= 0 or v_past <= 0:
+        assert at == max(s0 + gap, s0)
+    elif accel == 0 and v0 <= v_past:
+        assert math.isinf(at)
+    else:
+        t = (at - (s0 + gap)) / v_past  # when the point is there
+        assert at == pytest.approx(s0 + v0 * t + 0.5 * accel * t * t, rel=1e-9, abs=1e-6)
+        assert at >= s0 + gap
 
 
 def test_a_kept_crawl_too_slow_for_the_distance_does_not_stop_in_time():

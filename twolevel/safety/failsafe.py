@@ -143,7 +143,7 @@ def manoeuvres(settings: FailSafeSettings, zones: np.ndarray, s0: float, v0: flo
     each braking level, then clearing the first conflict zone (``zones`` (Z, 2) [m] of the centre)
     that the car is in or cannot be sure to stop before (its gentlest braking distance reaches
     it), with ``brake_full`` [m/s²] the full-braking deceleration. ``back`` = (e_goal [m], s_past
-    [m], e_beside [m][, v_past [m/s]]): the car is out of the route's lane (on the oncoming lane,
+    [m], e_beside [m][, v_past [m/s][, e_now [m]]]): the car is out of the route's lane (on the oncoming lane,
     passing): every braking level steers back to lateral offset e_goal while it brakes (behind
     what it passes), a creep at 1 m/s² steers back over the length the steering limit needs, and,
     when s_past is finite (the route position its centre must pass now to be ahead of what it
@@ -202,15 +202,39 @@ def catch_up(s0: float, v0: float, accel: float, s_past: float, v_past: float) -
     return s_past + v_past * t
 
 
+MIN_GAIN = 0.2
+"""[m/s²] The least acceleration a completing pass gains speed at: below it, it keeps its speed."""
+
+
+def _step_length(v: float, accel: float, k: float) -> float:
+    """[m] The length d of a smooth lateral step (3u² − 2u³) begun at speed ``v`` [m/s] and driven
+    at ``accel`` [m/s²] whose peak lateral acceleration, at the speed it ends with, stays within
+    the bound ``k`` [m] states: (v² + 2·accel·d)·k ≤ d² (k = 6·rise / bound)."""
+    return accel * k + math.sqrt(accel * accel * k * k + v * v * k)
+
+
+def _accel_within(v: float, d: float, k: float) -> float:
+    """[m/s²] The largest acceleration from speed ``v`` [m/s] at which a smooth lateral step of
+    length ``d`` [m] keeps within the bound ``k`` [m] (:func:`_step_length`'s); +inf when there is
+    no step (k = 0), negative when even the speed v is too fast for it."""
+    if k <= 0.0:
+        return math.inf
+    return (d * d - v * v * k) / (2.0 * k * max(d, 1e-6))
+
+
 def _returning(settings: FailSafeSettings, s0: float, v0: float, brake_full: float, e_goal: float,
-               s_past: float, e_beside: float, v_past: float = 0.0) -> list[Manoeuvre]:
+               s_past: float, e_beside: float, v_past: float = 0.0, e_now: float | None = None) -> list[Manoeuvre]:
     """:func:`manoeuvres` for a car out of the route's lane (its ``back``): the gentlest and the
     full braking level, the creep, and completing the pass at the speed it has (at
     :data:`KEEP_MIN` or more, when that gets it there in time: :func:`_moves`) or gaining 1.5
-    m/s², returning where it has caught up with what it passes (``v_past`` [m/s] its speed,
-    :func:`catch_up`), braking gently after — completing first when the car is already out beside what it
+    m/s² — less where the way out beside what it passes (from ``e_now`` [m], where it is; e_goal
+    when not given) would take more lateral acceleration at the speed gained than a_lat_max/2
+    (:func:`_accel_within`) —, returning where it has caught up with what it passes (``v_past``
+    [m/s] its speed, :func:`catch_up`) over a way back laid out for the speed it then has
+    (:func:`_step_length`), braking gently after — completing first when the car is already out beside what it
     passes (the likeliest to pass verification, tried alone first; few manoeuvres, since each is
     rolled out in half-second closed-loop segments)."""
+    e_now = e_goal if e_now is None else e_now
     levels = sorted({min(settings.decels), max(settings.decels)}) if settings.decels else [brake_full]
     out = [Manoeuvre(d, e_goal=e_goal, s_return=s0,
                      d_return=max(v0**2 / (2 * min(brake_full, d)), 0.5)) for d in levels]
@@ -218,14 +242,21 @@ def _returning(settings: FailSafeSettings, s0: float, v0: float, brake_full: flo
     d_min = math.sqrt(6.0 * 3.5 * 2.7 / math.tan(0.8 * settings.delta_max))  # a lane's width, wheelbase ~2.7 m
     out.append(Manoeuvre(levels[0], 1.0, s0 + d_min, e_goal, s0, d_min))
     if math.isfinite(s_past):
-        v = max(v0, PASS_PACE)
-        d_ret = v * math.sqrt(6.0 * 3.5 / (0.5 * settings.a_lat_max))  # a lane's width back
+        # a smooth step of rise R over d peaks at lateral acceleration v²·6R/d²: within a_lat_max/2
+        k_ret = 6.0 * 3.5 / (0.5 * settings.a_lat_max)  # [m] a lane's width back
+        k_out = 6.0 * abs(e_beside - e_now) / (0.5 * settings.a_lat_max)  # out beside it
+        room = max(0.6 * (max(s_past, s0) - s0), 0.5)  # out beside it before its rear
+        d_out = min(_step_length(max(v0, PASS_PACE), 0.0, k_ret), room)
+        gain = min(max(settings.clear_accels, default=0.0), _accel_within(v0, d_out, k_out))
         brake = min(settings.clear_brakes) if settings.clear_brakes else levels[0]
         complete = []
-        for a in sorted({0.0, max(settings.clear_accels, default=0.0)}):
+        for a in sorted({0.0, gain if gain >= MIN_GAIN else 0.0}):
             start = catch_up(s0, v0, a, s_past, v_past)
-            if math.isfinite(start) and _moves(a, v0, start + d_ret - s0, settings.max_time):
-                d_out = min(d_ret, max(0.6 * (max(s_past, s0) - s0), 0.5))  # out beside it before its rear
+            if not math.isfinite(start):
+                continue
+            v_ret = math.sqrt(v0 * v0 + 2.0 * a * max(start - s0, 0.0))  # at the start of the way back
+            d_ret = _step_length(max(v_ret, PASS_PACE), a, k_ret)
+            if _moves(a, v0, start + d_ret - s0, settings.max_time):
                 complete.append(Manoeuvre(brake, a, start + d_ret, e_goal, start, d_ret, e_beside, s0, d_out))
         out = complete + out if abs(e_beside - e_goal) > 0 and v0 > 1.0 else out + complete
     return out

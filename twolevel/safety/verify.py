@@ -245,7 +245,7 @@ def _same(a: np.ndarray | None, b: np.ndarray | None) -> bool:
 
 
 def _back(ctx: Context, traffic: TrafficState, s_ego: float, e_ego: float, psi: float
-          ) -> tuple[float, float, float, float, np.ndarray] | None:
+          ) -> tuple[float, float, float, float, float, np.ndarray] | None:
     """Where a fail-safe must take the ego back to, when at route position ``s_ego`` [m] its
     lateral offset ``e_ego`` [m] and heading ``psi`` [rad] put its box so far out of the route's
     lane (and the lanes running its way) that standing there would be standing on another lane:
@@ -254,7 +254,8 @@ def _back(ctx: Context, traffic: TrafficState, s_ego: float, e_ego: float, psi: 
     :data:`PASS_REACH`, with D_safe to spare, −inf when there are none; the lateral offset [m]
     beside them on the ego's side, with the clearance each is owed
     (:func:`twolevel.world.clearance.passing_clearance`), NaN when none; the fastest of
-    their speeds along the route [m/s] (0 when none: they may drive on at up to it); which
+    their speeds along the route [m/s] (0 when none: they may drive on at up to it); ``e_ego``;
+    which
     participants (N,) they are: being overtaken, they do not speed up — the Vienna Convention on
     Road Traffic, art. 11(3), as the assumptions state, :mod:`twolevel.world.assumptions`). None: it
     is in its lane."""
@@ -289,7 +290,7 @@ def _back(ctx: Context, traffic: TrafficState, s_ego: float, e_ego: float, psi: 
             along = traffic.v[idx][beside] * np.cos(traffic.psi[idx][beside] - w.route.heading_at(s_i[beside]))
             v_past = max(float(np.max(along)), 0.0)
             passed[idx[beside]] = True
-    return min(max(0.0, lo), hi), s_past, e_beside, v_past, passed
+    return min(max(0.0, lo), hi), s_past, e_beside, v_past, e_ego, passed
 
 
 @dataclass(frozen=True, eq=False)
@@ -481,18 +482,18 @@ def _verify(ctx: Context, x_start: np.ndarray, prefix: np.ndarray, traffic: Traf
 
 def _first_safe(ctx: Context, x_start: np.ndarray, prefix: np.ndarray, traffic: TrafficState, t: float,
                 tm: dict[str, float], pred: _Prediction | None, follower: np.ndarray, protected: frozenset[int],
-                s: float, back: tuple[float, float, float, float, np.ndarray] | None
+                s: float, back: tuple[float, float, float, float, float, np.ndarray] | None
                 ) -> tuple[FailSafe | None, list[Refutation], _Prediction, np.ndarray | None]:
     """:func:`_verify`'s trial of the manoeuvres for the ego at route position ``s`` [m] (``back``:
     :func:`_back`'s): the first fail-safe that passes, the refutations of those before it, the
     prediction (reused when its participants and holds are the same) and the state where the
     first fail-safe refuted for standing on another lane stands (None: none was)."""
     w, st = ctx.world, ctx.settings
-    hold = None if back is None else back[4]
+    hold = None if back is None else back[5]
     if pred is None or not np.array_equal(pred.include, ~follower) or not _same(pred.hold, hold):
         pred = _Prediction(~follower, hold)
     plan = manoeuvres(st.failsafe, ctx.network.zones, s, max(float(x_start[3]), 0.0), ctx.brake_full,
-                      None if back is None else back[:4])
+                      None if back is None else back[:5])
     refuted: list[Refutation] = []
     stood: np.ndarray | None = None
     for batch in (plan[:1], plan[1:]):  # the gentlest alone (usually enough), then the others together
