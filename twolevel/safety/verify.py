@@ -244,10 +244,10 @@ def _same(a: np.ndarray | None, b: np.ndarray | None) -> bool:
     return (a is None and b is None) or (a is not None and b is not None and np.array_equal(a, b))
 
 
-def _back(ctx: Context, traffic: TrafficState, s_ego: float, e_ego: float, psi: float
+def _back(ctx: Context, traffic: TrafficState, s_ego: float, e_ego: float, psi: float, v_ego: float
           ) -> tuple[float, float, float, float, float, np.ndarray] | None:
     """Where a fail-safe must take the ego back to, when at route position ``s_ego`` [m] its
-    lateral offset ``e_ego`` [m] and heading ``psi`` [rad] put its box so far out of the route's
+    lateral offset ``e_ego`` [m], heading ``psi`` [rad] and speed ``v_ego`` [m/s] put its box so far out of the route's
     lane (and the lanes running its way) that standing there would be standing on another lane:
     (lateral offset of the route lane's centre [m], route position its centre must pass to be
     ahead of the vehicles in the route's lane it is beside or passing, within
@@ -255,10 +255,10 @@ def _back(ctx: Context, traffic: TrafficState, s_ego: float, e_ego: float, psi: 
     beside them on the ego's side, with the clearance each is owed
     (:func:`twolevel.world.clearance.passing_clearance`), NaN when none; the fastest of
     their speeds along the route [m/s] (0 when none: they may drive on at up to it); ``e_ego``;
-    which
-    participants (N,) they are: being overtaken, they do not speed up — the Vienna Convention on
-    Road Traffic, art. 11(3), as the assumptions state, :mod:`twolevel.world.assumptions`). None: it
-    is in its lane."""
+    which participants (N,) are being overtaken: those and, until the ego is back in its lane,
+    the slower ones it has passed (behind it in the route's lane within :data:`PASS_REACH`) do not
+    speed up — the Vienna Convention on Road Traffic, art. 11(3), as the assumptions state,
+    :mod:`twolevel.world.assumptions`). None: it is in its lane."""
     w, m = ctx.world, ctx.settings.margin
     area = drivable_area(w.lanes, w.route, np.array([s_ego]), oncoming=False)
     rel = float(psi - w.route.heading_at(np.array([s_ego]))[0])
@@ -281,14 +281,18 @@ def _back(ctx: Context, traffic: TrafficState, s_ego: float, e_ego: float, psi: 
         length = w.parts.length[idx]
         beside = ((np.abs(e_i) < half + 0.5 * w.parts.width[idx]) & (s_i + length / 2 > s_ego - w.ego.length / 2)
                   & (s_i - s_ego < PASS_REACH))
+        along = traffic.v[idx] * np.cos(traffic.psi[idx] - w.route.heading_at(s_i))
+        # passed and not yet returned in front of: behind it in the route's lane, slower than it
+        behind = ((np.abs(e_i) < half + 0.5 * w.parts.width[idx]) & (s_i < s_ego) & (s_ego - s_i < PASS_REACH)
+                  & (along < v_ego))
+        passed[idx[behind]] = True
         if beside.any():
             s_past = float(np.max(s_i[beside] + length[beside] / 2)) + w.ego.length / 2 + w.settings.D_safe
             owed = passing_clearance(w.parts.user[idx][beside], float(w.route.limit_at(s_ego)))
             reach = e_i[beside] + side * (0.5 * (w.parts.width[idx][beside] + ctx.params.width) + owed)
             out = half + 0.5 * ctx.params.width + m + 0.25  # wholly out of the lane (its occupancy spans it)
             e_beside = float(side * max(float(np.max(side * reach)), out))
-            along = traffic.v[idx][beside] * np.cos(traffic.psi[idx][beside] - w.route.heading_at(s_i[beside]))
-            v_past = max(float(np.max(along)), 0.0)
+            v_past = max(float(np.max(along[beside])), 0.0)
             passed[idx[beside]] = True
     return min(max(0.0, lo), hi), s_past, e_beside, v_past, e_ego, passed
 
@@ -469,11 +473,11 @@ def _verify(ctx: Context, x_start: np.ndarray, prefix: np.ndarray, traffic: Traf
     s, e = _route_state(ctx, x_start, s_hint)
     now = _route_state(ctx, prefix[0], s_hint) if len(prefix) else (s, e)
     follower, protected = _excluded(ctx, traffic, *now)
-    back = _back(ctx, traffic, s, e, float(x_start[2]))
+    back = _back(ctx, traffic, s, e, float(x_start[2]), float(x_start[3]))
     fs, refuted, pred, stood = _first_safe(ctx, x_start, prefix, traffic, t, tm, pred, follower, protected, s, back)
     if fs is None and back is None and stood is not None:
         s_at, e_at = _route_state(ctx, stood, s)
-        back = _back(ctx, traffic, s_at, e_at, float(stood[2]))
+        back = _back(ctx, traffic, s_at, e_at, float(stood[2]), float(x_start[3]))
         if back is not None:
             fs, more, pred, _ = _first_safe(ctx, x_start, prefix, traffic, t, tm, pred, follower, protected, s, back)
             refuted += more
