@@ -101,7 +101,8 @@ def test_completing_a_pass_at_its_speed_only_at_a_pace_that_gets_there(v0, ahead
 
 @settings(max_examples=300, deadline=None)
 @given(s0=st.floats(0.0, 100.0), v0=st.floats(0.0, 20.0), accel=st.sampled_from([0.0, 0.5, 1.5]),
-       gap=st.one_of(st.floats(-20.0, 0.0), st.floats(0.01, 100.0)), v_past=st.one_of(st.just(0.0), st.floats(0.1, 15.0)))
+       gap=st.one_of(st.floats(-20.0, 0.0), st.floats(0.01, 100.0)),
+       v_past=st.one_of(st.just(0.0), st.floats(0.1, 15.0)))
 def test_a_completing_pass_returns_where_it_has_caught_up(s0, v0, accel, gap, v_past):
     """catch_up: where the car, holding its acceleration, is level with a point that drives on at
     v_past from gap ahead of it — the point is there at that moment; behind the car or standing,

@@ -47,8 +47,8 @@ from twolevel.models.params import VehicleParams
 from twolevel.models.rollout import Backend, rollout
 from twolevel.world.geometry import Route
 
-__all__ = ["FailSafeSettings", "Manoeuvre", "FailSafe", "manoeuvres", "roll", "brake_rate", "return_path", "catch_up",
-           "FULL"]
+__all__ = ["FailSafeSettings", "Manoeuvre", "FailSafe", "manoeuvres", "roll", "brake_rate", "return_path",
+           "catch_up", "MIN_GAIN", "FULL"]
 
 FULL = math.inf
 """Deceleration level meaning full braking (γ = −1)."""
@@ -142,15 +142,16 @@ def manoeuvres(settings: FailSafeSettings, zones: np.ndarray, s0: float, v0: flo
     """The manoeuvres to try from route position ``s0`` [m] at speed ``v0`` [m/s], in order:
     each braking level, then clearing the first conflict zone (``zones`` (Z, 2) [m] of the centre)
     that the car is in or cannot be sure to stop before (its gentlest braking distance reaches
-    it), with ``brake_full`` [m/s²] the full-braking deceleration. ``back`` = (e_goal [m], s_past
-    [m], e_beside [m][, v_past [m/s][, e_now [m]]]): the car is out of the route's lane (on the oncoming lane,
-    passing): every braking level steers back to lateral offset e_goal while it brakes (behind
-    what it passes), a creep at 1 m/s² steers back over the length the steering limit needs, and,
-    when s_past is finite (the route position its centre must pass now to be ahead of what it
-    passes, which drives on at up to v_past along the route, 0 when omitted), it also completes
-    the pass: keeps its speed (or gains some) while it moves out to e_beside (beside what it
-    passes) and past where it catches up with s_past (:func:`catch_up`), steers back over the
-    distance a lateral acceleration of ``settings.a_lat_max``/2 needs, then brakes."""
+    it), with ``brake_full`` [m/s²] the full-braking deceleration. ``back`` = (e_goal [m],
+    s_past [m], e_beside [m][, v_past [m/s][, e_now [m]]]): the car is out of the route's lane
+    (on the oncoming lane, passing): every braking level steers back to lateral offset e_goal
+    while it brakes (behind what it passes), a creep at 1 m/s² steers back over the length the
+    steering limit needs, and, when s_past is finite (the route position its centre must pass
+    now to be ahead of what it passes, which drives on at up to v_past along the route, 0 when
+    omitted), it also completes the pass: keeps its speed (or gains some) while it moves from
+    e_now out to e_beside (beside what it passes) and past where it catches up with s_past
+    (:func:`catch_up`), steers back over the distance a lateral acceleration of
+    ``settings.a_lat_max``/2 needs at the speed it has there, then brakes (:func:`_returning`)."""
     if back is not None:
         return _returning(settings, s0, v0, brake_full, *back)
     out = [Manoeuvre(d) for d in settings.decels]
@@ -231,9 +232,9 @@ def _returning(settings: FailSafeSettings, s0: float, v0: float, brake_full: flo
     when not given) would take more lateral acceleration at the speed gained than a_lat_max/2
     (:func:`_accel_within`) —, returning where it has caught up with what it passes (``v_past``
     [m/s] its speed, :func:`catch_up`) over a way back laid out for the speed it then has
-    (:func:`_step_length`), braking gently after — completing first when the car is already out beside what it
-    passes (the likeliest to pass verification, tried alone first; few manoeuvres, since each is
-    rolled out in half-second closed-loop segments)."""
+    (:func:`_step_length`), braking gently after — completing first when the car is already out
+    beside what it passes (the likeliest to pass verification, tried alone first; few
+    manoeuvres, since each is rolled out in half-second closed-loop segments)."""
     e_now = e_goal if e_now is None else e_now
     levels = sorted({min(settings.decels), max(settings.decels)}) if settings.decels else [brake_full]
     out = [Manoeuvre(d, e_goal=e_goal, s_return=s0,
