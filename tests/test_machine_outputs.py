@@ -69,7 +69,8 @@ def test_check_writes_only_its_format_on_stdout(fmt: str) -> None:
 
 def test_monitor_json_is_strict_and_its_verdicts_follow_robustness(tmp_path: Path) -> None:
     """±inf robustness is written as a string, a rule whose robustness is undefined (NaN) is
-    left out with a finding, and each verdict agrees with the sign of its robustness."""
+    not judged (a finding, null robustness), and each verdict agrees with the sign of its
+    robustness."""
     rules = tmp_path / "r.stl"
     rules.write_text(
         "input float v\ninput float d_stop\n"
@@ -83,7 +84,11 @@ def test_monitor_json_is_strict_and_its_verdicts_follow_robustness(tmp_path: Pat
     assert "SIM607" in res.stderr and "undefined" in res.stderr
     doc = strict_json(res.stdout)
     got = {r["name"]: r for r in doc["rules"]}  # type: ignore[index]
-    assert set(got) == {"always_true", "never", "far", "slow"}
+    assert list(got) == ["always_true", "never", "far", "slow", "undefined"]  # the file's order
+    undefined = got.pop("undefined")
+    assert undefined == {"name": "undefined", "verdict": "not judged", "code": "SIM607", "robustness": None,
+                         "satisfied": None, "first_violation_t": None}
+    assert [r["verdict"] for r in got.values()] == ["holds", "violated", "violated", "violated"]
     assert got["always_true"]["robustness"] == "inf" and got["never"]["robustness"] == "-inf"
     assert got["far"]["robustness"] == "inf" and got["far"]["first_violation_t"] == pytest.approx(0.2)
     for r in got.values():

@@ -231,8 +231,9 @@ def monitor(
     """Evaluate every rule of RULES over a recorded drive (offline, RTAMT semantics).
 
     Exit 0 when every rule holds at every time of the trace, 1 when some rule is violated
-    somewhere (first_violation_t), 2 when the rule file or the trace cannot be used or a rule
-    could not be evaluated (e.g. it reads a column the trace lacks).
+    somewhere (first_violation_t), 2 when the rule file or the trace cannot be used or some rule
+    could not be judged (verdict "not judged": it reads a column the trace lacks, or it
+    quantifies over participants the trace does not record, SIM609).
     """
     from twolevel import pipeline
     from twolevel.diagnostics import render
@@ -247,7 +248,7 @@ def monitor(
 
     payload = to_json(res.report)
     if not payload["rules"] and any(d.is_error for d in res.diagnostics):
-        raise typer.Exit(EXIT_USAGE)  # nothing was evaluated: the findings above say why
+        raise typer.Exit(EXIT_USAGE)  # no rule to give a verdict: the findings above say why
     if output is MonitorFormat.json:
         _emit_json(payload)
     else:
@@ -255,18 +256,21 @@ def monitor(
         from rich.table import Table
 
         table = Table(title=f"{rules} over {trace} ({res.report.samples} samples, dt = {res.report.dt:g} s)", title_justify="left")
-        for col, justify in (("rule", "left"), ("robustness at t=0", "right"), ("at t=0", "center"), ("first violation \\[s]", "right")):
+        for col, justify in (("rule", "left"), ("verdict", "left"), ("robustness at t=0", "right"), ("at t=0", "center"),
+                             ("first violation \\[s]", "right")):
             table.add_column(col, justify=justify)
         for r in rows:
-            first = r["first_violation_t"]
+            first, rob = r["first_violation_t"], r["robustness"]
+            judged = r["satisfied"] is not None
             table.add_row(
                 r["name"],
-                f"{r['robustness']:.4g}" if isinstance(r["robustness"], float) else str(r["robustness"]),
-                "holds" if r["satisfied"] else "violated",
+                r["verdict"] if judged else f"{r['verdict']} ({r['code']})",
+                f"{rob:.4g}" if isinstance(rob, float) else "-" if rob is None else str(rob),
+                ("holds" if r["satisfied"] else "violated") if judged else "-",
                 "-" if first is None else f"{first:g}",
             )
         _console().print(table)
-    if any(d.is_error for d in res.diagnostics):  # some rule could not be evaluated
+    if any(d.is_error for d in res.diagnostics):  # some rule could not be judged
         raise typer.Exit(EXIT_USAGE)
     raise typer.Exit(EXIT_FAIL if res.violated else EXIT_OK)
 

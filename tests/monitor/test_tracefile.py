@@ -215,6 +215,7 @@ def test_json_report_is_json_safe(tmp_path: Path) -> None:
     assert json.loads(json.dumps(doc, allow_nan=False)) == doc
     assert doc["rules"][0] == {
         "name": "pos",
+        "verdict": "violated",
         "robustness": 1.0,
         "satisfied": True,
         "first_violation_t": 0.5,

@@ -17,4 +17,5 @@ SIM605 = Code("SIM605", "unreadable-trace", E, "The trace file is missing, binar
 SIM606 = Code("SIM606", "bad-header", E, "The trace's header has an empty or repeated column name.")
 SIM607 = Code("SIM607", "cannot-monitor", E, "A rule cannot be evaluated on the trace.")
 SIM608 = Code("SIM608", "assumed-period", I, "The sampling period could not be read from the trace and was assumed.")
-SIM609 = Code("SIM609", "no-participants", W, "A rule quantifies over participants but the trace has no presence column (present[ID]) for any.")
+SIM609 = Code("SIM609", "no-participants", E, "A rule quantifies over participants but the trace has no presence "
+              "column (present[ID]) for any: the rule is not judged (its quantifiers would hold vacuously).")

@@ -11,11 +11,16 @@ uniform (spacing within 1 % of its median) unless a period ``dt`` is given, whic
 The file is streamed: cells go straight into typed arrays (8 bytes per number), so a large file
 costs about its numeric size in memory.
 
-JSON (:func:`to_json`): ``{"rules": [{"name", "robustness", "satisfied", "first_violation_t"}]}``
-(+ ``"series"`` per rule when asked). ``robustness`` is the value at the first sample; infinite
-values (``true``, empty windows, overflows) are written as the strings ``"inf"`` / ``"-inf"``;
-``first_violation_t`` is in seconds from the time column, or ``null``. A rule whose robustness is
-NaN somewhere (``inf - inf``) gets no verdict but SIM607, so NaN (``null``) never reaches it.
+JSON (:func:`to_json`): ``{"rules": [{"name", "verdict", "robustness", "satisfied",
+"first_violation_t"}]}`` (+ ``"series"`` per rule when asked), every rule of the file in its order.
+``verdict`` is ``"holds"`` (at every sample), ``"violated"`` (somewhere) or ``"not judged"``;
+``robustness`` is the value at the first sample; infinite values (``true``, empty windows,
+overflows) are written as the strings ``"inf"`` / ``"-inf"``; ``first_violation_t`` is in seconds
+from the time column, or ``null``. A rule that could not be judged on the trace (it reads a column
+the trace lacks, SIM602; its robustness is NaN somewhere, SIM607; it quantifies over participants
+and the trace records none, SIM609; it reads such a rule) has ``"verdict": "not judged"``, the
+code that says why (``"code"``) and ``null`` robustness, verdict and violation time: never a
+vacuous ``true``.
 """
 
 from __future__ import annotations
@@ -45,6 +50,7 @@ from twolevel.stl.analysis import PRESENT, fold_term, participant_key, participa
 __all__ = [
     "Trace",
     "RuleVerdict",
+    "Unjudged",
     "MonitorReport",
     "read_trace",
     "monitor_trace",
@@ -56,6 +62,7 @@ TIME_COLUMNS = ("t", "time")
 SPACING_TOLERANCE = 0.01  # relative to the period
 ONE_ROW_DT = 0.1  # [s] assumed when a one-row trace gives no period and none is given
 MAX_CELL_ERRORS = 20
+NOT_JUDGED = "not judged"  # the verdict of a rule the trace cannot judge (JSON, table)
 BUILTIN_SIGNALS: Mapping[str, tuple[str, ...]] = {"collision_free": ("min_gap",)}
 
 
@@ -89,14 +96,27 @@ class RuleVerdict:
     series: np.ndarray | None = None
 
 
+@dataclass(frozen=True)
+class Unjudged:
+    """A rule the trace cannot judge: ``code`` the diagnostic that says why (``SIM602`` a column
+    missing, ``SIM607`` undefined robustness, ``SIM609`` no participants recorded; a rule that
+    reads such a rule carries that rule's code)."""
+
+    name: str
+    code: str
+
+
 @dataclass(frozen=True, eq=False)
 class MonitorReport:
-    """Every evaluated rule, in the rule file's order."""
+    """Every evaluated rule (``rules``) and every rule that could not be judged (``unjudged``),
+    each in the rule file's order; ``order`` every rule's name in that order."""
 
     trace: str
     dt: float
     samples: int
     rules: tuple[RuleVerdict, ...] = field(default_factory=tuple)
+    unjudged: tuple[Unjudged, ...] = field(default_factory=tuple)
+    order: tuple[str, ...] = field(default_factory=tuple)
 
     @property
     def violated(self) -> bool:
@@ -479,20 +499,23 @@ def monitor_trace(
     series: bool = False,
     builtins: Mapping[str, Builtin] | None = None,
 ) -> tuple[MonitorReport, list[Diagnostic]]:
-    """Evaluate every rule over the trace (offline, RTAMT semantics). A rule that reads a column
-    the trace lacks (or depends on such a rule) is left out of the report with a diagnostic."""
+    """Evaluate every rule over the trace (offline, RTAMT semantics). A rule that cannot be judged
+    on it (it reads a column the trace lacks, its robustness is undefined, it quantifies over
+    participants the trace does not record, or it reads such a rule) gets no verdict: a
+    diagnostic, and an entry in the report's ``unjudged``."""
     if isinstance(rules, ast.RuleFile):
         consts = {**consts_of(rules), **consts}
         rules = rules.rules
     builtins = DEFAULT_BUILTINS if builtins is None else builtins
     diags: list[Diagnostic] = []
     report_rules: list[RuleVerdict] = []
-    failed: set[str] = set()
+    failed: dict[str, str] = {}  # rule name -> the code of why it was not judged
     known = list(trace.columns)
     whole = Span.whole_file(trace.path)
+    order = tuple(r.name for r in rules)
     if trace.samples == 0:
         diags.append(SIM604("the trace has no samples", whole))
-        return MonitorReport(trace.path, trace.dt, 0, ()), diags
+        return MonitorReport(trace.path, trace.dt, 0, (), tuple(Unjudged(n, SIM604.id) for n in order), order), diags
     hints: dict[str, str] = {}
     skip = set(consts) | {r.name for r in rules}  # once: per rule it made R rules cost O(R²)
     pids = participants_in(trace.columns)
@@ -503,12 +526,16 @@ def monitor_trace(
         evaluator = exc
     for rule in rules:
         missing = []
+        why: str | None = None
         if not pids and quantifies(rule.formula):
+            why = SIM609.id
             diags.append(SIM609(
-                f"rule '{rule.name}' quantifies over participants, but the trace has no column "
-                f"{participant_key(PRESENT, 'ID')}: with no participant its quantifiers are vacuous",
+                f"rule '{rule.name}' cannot be judged: it quantifies over participants, but the trace "
+                f"{os.path.basename(trace.path)} records none (no column {participant_key(PRESENT, 'ID')}), "
+                "so its quantifiers would hold vacuously",
                 rule.name_span or rule.span or whole,
-                hint="record each participant's presence (+inf or 1 where present) and its signals NAME[ID]"))
+                hint="re-run `twolevel simulate` with this rule file among the scenario's rules: a run records "
+                     "each participant's presence present[ID] and signals NAME[ID] only when a loaded rule reads them"))
         for node in _reads(rule.formula, skip):
             for name in _columns_read(node, pids):
                 if name in trace.unusable and name not in missing:
@@ -529,9 +556,12 @@ def monitor_trace(
                             hint=hint,
                         )
                     )
-        deps = [n.name for n in rule.formula.walk() if isinstance(n, ast.Var) and n.name in failed]
-        if missing or deps:
-            failed.add(rule.name)
+        deps = [failed[n.name] for n in rule.formula.walk() if isinstance(n, ast.Var) and n.name in failed]
+        if missing:
+            why = (trace.unusable[missing[0]].code if missing[0] in trace.unusable else SIM602.id)
+        why = why or (deps[0] if deps else None)
+        if why is not None:
+            failed[rule.name] = why
             continue
         try:
             if isinstance(evaluator, MonitorError):
@@ -546,7 +576,7 @@ def monitor_trace(
             evaluator.add(rule.name, rob)
         except MonitorError as exc:
             diags.append(SIM607(f"rule '{rule.name}': {exc.message}", rule.name_span or rule.span or whole))
-            failed.add(rule.name)
+            failed[rule.name] = SIM607.id
             continue
         neg = np.flatnonzero(rob < 0)
         report_rules.append(
@@ -558,20 +588,26 @@ def monitor_trace(
                 series=rob if series else None,
             )
         )
-    return MonitorReport(trace.path, trace.dt, trace.samples, tuple(report_rules)), diags
+    unjudged = tuple(Unjudged(name, code) for name, code in failed.items())
+    return MonitorReport(trace.path, trace.dt, trace.samples, tuple(report_rules), unjudged, order), diags
 
 
 def to_json(report: MonitorReport) -> dict[str, Any]:
     """The report as JSON-safe data (see the module docstring for inf/NaN)."""
-    rules = []
+    items: dict[str, dict[str, Any]] = {}
     for r in report.rules:
         item: dict[str, Any] = {
             "name": r.name,
+            "verdict": "holds" if r.satisfied and r.first_violation_t is None else "violated",
             "robustness": _finite(r.robustness),
             "satisfied": r.satisfied,
             "first_violation_t": r.first_violation_t,
         }
         if r.series is not None:
             item["series"] = [_finite(float(v)) for v in r.series]
-        rules.append(item)
-    return {"rules": rules}
+        items[r.name] = item
+    for u in report.unjudged:
+        items[u.name] = {"name": u.name, "verdict": NOT_JUDGED, "code": u.code, "robustness": None,
+                         "satisfied": None, "first_violation_t": None}
+    order = report.order or tuple(items)
+    return {"rules": [items[name] for name in order if name in items]}
