@@ -27,7 +27,8 @@ def test_clean_map_and_scenario_load(world: Path) -> None:
     assert diags == []
     assert scn is not None and scn.map.spec.name == "tiny"
     assert [p.id for p in scn.spec.participants] == ["parked"]
-    assert scn.spec.controller.H == 10 and scn.spec.controller.dt == 0.1 and scn.spec.controller.r_near == 10
+    assert scn.spec.controller.H == 10 and scn.spec.controller.dt == 0.1
+    assert scn.spec.controller.r_near is None  # by default 2 s at the fastest speed allowed (test_near_radius.py)
     assert scn.spec.ego.box.length == 4.22 and scn.spec.ego.box.width == 1.8
     assert check_world_file(world) == []
 

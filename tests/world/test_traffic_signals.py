@@ -90,7 +90,8 @@ def test_nearby(tmp_path: Path) -> None:
 def test_signals_by_hand(tmp_path: Path) -> None:
     w = world(tmp_path, "participants:\n"
               "  - {id: lead, behaviour: constant_velocity, start: {lane: a, s: 20}, speed: 2}\n"
-              "  - {id: side, behaviour: stationary, start: {lane: b, s: 14}}\n")
+              "  - {id: side, behaviour: stationary, start: {lane: b, s: 14}}\n",
+              "controller: {r_near: 10}\n")  # the paper's radius (by default 2 s at the 10 m/s limit: 20 m)
     T = 5
     x = np.array([0.0, 11, 44, 48, 48])
     ego = {"x": x, "y": np.zeros(T), "psi": np.zeros(T), "v": np.array([5.0, 5, 3, 0, 0])}

@@ -32,7 +32,7 @@ from twolevel.world.schema import LaneSpec, Parameter, Road
 if TYPE_CHECKING:
     from twolevel.world.loader import Scenario
 
-__all__ = ["lint_scenario", "lint_world_file", "extremes", "fastest", "lane_bends", "MAX_CORNERS"]
+__all__ = ["lint_scenario", "lint_world_file", "extremes", "lane_bends", "MAX_CORNERS"]
 
 MAX_CORNERS = 16
 """Parameter boxes with at most this many corners are also checked at every corner."""
@@ -95,25 +95,8 @@ def _parameter_ranges(scn: "Scenario") -> list[Diagnostic]:
     return out
 
 
-def fastest(scn: "Scenario", lanes: list[str]) -> tuple[float, str]:
-    """The highest speed [m/s] a scenario lets the ego drive along its route's ``lanes``: the
-    highest limit on them (their own or the map's default, and the signs on them), capped by the
-    ego's desired speed, and at least its speed at the start; and what set it, in words."""
-    spec, m = scn.spec, scn.map.spec
-    own = {ln.id: ln.speed_limit for ln in m.lane_specs()}
-    limits = [own.get(lane) or m.default_speed_limit for lane in lanes]
-    limits += [sign.value for sign in m.speed_limits if sign.lane in lanes]
-    top = max(limits)
-    v, why = top, f"speed limit {top:g} m/s"
-    if spec.ego.desired_speed is not None:
-        v, why = min(v, spec.ego.desired_speed), why + f", desired speed {spec.ego.desired_speed:g} m/s"
-    if spec.ego.speed > v:
-        v, why = spec.ego.speed, f"start speed {spec.ego.speed:g} m/s"
-    return v, why
-
-
 def _goal_time(scn: "Scenario") -> list[Diagnostic]:
-    from twolevel.world.loader import _read_kind, _route_lanes, all_lengths, route_length, successors
+    from twolevel.world.loader import _read_kind, _route_lanes, all_lengths, fastest, route_length, successors
 
     spec, m = scn.spec, scn.map.spec
     if spec.expect.goal is None:
@@ -141,7 +124,7 @@ def _goal_time(scn: "Scenario") -> list[Diagnostic]:
 def _sensing(scn: "Scenario") -> list[Diagnostic]:
     """YML431, at ``controller.sensor_range`` (or the section, or the file, where it is not given)."""
     from twolevel.world.assumptions import safe_distance
-    from twolevel.world.loader import _read_kind, _route_lanes, sensing_of, successors
+    from twolevel.world.loader import _read_kind, _route_lanes, fastest, sensing_of, successors
 
     spec = scn.spec
     lanes = _route_lanes(spec, successors(scn.map.spec)) or [spec.route.start.lane]

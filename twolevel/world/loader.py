@@ -29,14 +29,15 @@ from twolevel.world.document import Document, Path_, read_document
 from twolevel.world.junction import plan_junctions
 from twolevel.world.layout import check_layout, lane_lengths
 from twolevel.world.parameters import check_variants, explain, substitute
-from twolevel.world.schema import DEFAULT_SENSOR_RANGE, MAX_ROUTE_POINTS, MapFile, ParameterDeclarations, ScenarioFile
+from twolevel.world.schema import (DEFAULT_SENSOR_RANGE, MAX_ROUTE_POINTS, R_NEAR_FLOOR, R_NEAR_HEADWAY, MapFile,
+                                   ParameterDeclarations, ScenarioFile)
 from twolevel.world.scripts import check_scripts
 
 if typing.TYPE_CHECKING:
     from twolevel.world.assumptions import ResponseBounds
 
 __all__ = ["Map", "Scenario", "RuleFile", "Sensing", "load_map", "load_scenario", "check_world_file", "file_kind",
-           "sensing_of", "successors", "all_lengths"]
+           "sensing_of", "fastest", "near_radius", "successors", "all_lengths"]
 
 
 @dataclass(frozen=True)
@@ -536,8 +537,37 @@ def sensing_of(spec: ScenarioFile) -> Sensing:
     a_max = float(spec.ego.vehicle.get("a_max", BicycleParams.a_max))
     response = ResponseBounds(c.dt if c.rss_response is None else c.rss_response, a_max, c.rss_brake,
                               from_spec(spec.assumptions).response.brake_max)
-    rng = max(DEFAULT_SENSOR_RANGE, c.r_near) if c.sensor_range is None else c.sensor_range
+    rng = max(DEFAULT_SENSOR_RANGE, c.r_near or 0.0) if c.sensor_range is None else c.sensor_range
     return Sensing(response, rng, c.D_safe, stopping_speed(rng - spec.ego.box.length - c.D_safe, response))
+
+
+def fastest(scn: "Scenario", lanes: list[str]) -> tuple[float, str]:
+    """The highest speed [m/s] a scenario lets the ego drive along its route's ``lanes``: the
+    highest limit on them (their own or the map's default, and the signs on them), capped by the
+    ego's desired speed, and at least its speed at the start; and what set it, in words."""
+    spec, m = scn.spec, scn.map.spec
+    own = {ln.id: ln.speed_limit for ln in m.lane_specs()}
+    limits = [own.get(lane) or m.default_speed_limit for lane in lanes]
+    limits += [sign.value for sign in m.speed_limits if sign.lane in lanes]
+    top = max(limits)
+    v, why = top, f"speed limit {top:g} m/s"
+    if spec.ego.desired_speed is not None:
+        v, why = min(v, spec.ego.desired_speed), why + f", desired speed {spec.ego.desired_speed:g} m/s"
+    if spec.ego.speed > v:
+        v, why = spec.ego.speed, f"start speed {spec.ego.speed:g} m/s"
+    return v, why
+
+
+def near_radius(scn: "Scenario") -> float:
+    """The scenario's ``r_near`` [m]: ``controller.r_near`` where it is given, else the distance
+    covered in :data:`~twolevel.world.schema.R_NEAR_HEADWAY` at the fastest speed the scenario
+    lets the ego drive along its route (:func:`fastest`), at least
+    :data:`~twolevel.world.schema.R_NEAR_FLOOR`, at most the sensing range (pure Python)."""
+    spec = scn.spec
+    if spec.controller.r_near is not None:
+        return float(spec.controller.r_near)
+    v, _ = fastest(scn, _route_lanes(spec, successors(scn.map.spec)) or [spec.route.start.lane])
+    return min(max(R_NEAR_FLOOR, R_NEAR_HEADWAY * v), sensing_of(spec).range)
 
 
 def _check_controller(spec: ScenarioFile, doc: Document, m: MapFile, succ: dict[str, list[str]]) -> list[Diagnostic]:
@@ -559,7 +589,7 @@ def _check_controller(spec: ScenarioFile, doc: Document, m: MapFile, succ: dict[
         out.append(YML430(text, doc.locate(("controller", key), value=True),
                           hint=f"the look-ahead is H = {c.H} steps of dt = {c.dt:g} s, then coarse steps that are "
                                "whole numbers of dt"))
-    if c.sensor_range is not None and c.sensor_range < c.r_near:
+    if c.sensor_range is not None and c.r_near is not None and c.sensor_range < c.r_near:
         out.append(YML414(f"sensor_range = {c.sensor_range:g} m is shorter than r_near = {c.r_near:g} m",
                           doc.locate(("controller", "sensor_range"), value=True),
                           hint="the MPC constrains the vehicles within r_near, which the ego must see"))

@@ -11,9 +11,10 @@ Conventions: lengths in metres, speeds in m/s, times in seconds, **angles in deg
 are measured counter-clockwise from the x axis; a positive arc angle turns left). A lateral offset
 is positive to the left of the direction the road is drawn in.
 
-Defaults are the paper's (Aasi, Vasile, Belta 2021): H = 10, dt = 0.1 s, r_near = 10 m, r = 0.3,
-D_safe = 1 m, box 4.22 m × 1.8 m, l_f = 2.11 m (in ``ego.vehicle``, validated by the models
-package), IDM after Treiber et al. (2000).
+Defaults are the paper's (Aasi, Vasile, Belta 2021): H = 10, dt = 0.1 s, r = 0.3, D_safe = 1 m,
+box 4.22 m × 1.8 m, l_f = 2.11 m (in ``ego.vehicle``, validated by the models package), IDM after
+Treiber et al. (2000); r_near grows with the speed the scenario allows
+(:data:`R_NEAR_HEADWAY`), the paper's 10 m its floor.
 
 Imported by ``twolevel check``: pydantic and the standard library only (no numpy).
 """
@@ -33,7 +34,7 @@ __all__ = [
     "RunSettings", "WeightsSpec", "ScenarioFile", "KMH", "Number", "Count", "COORD_MAX", "DEFAULT_SENSOR_RANGE",
     "TIME_MAX", "CONST_MAX", "SEED_MAX", "S_MAX", "MIN_PIECE", "MIN_SPACING", "MAX_ROUTE_POINTS",
     "UserBoundsSpec", "PedestrianBoundsSpec", "ResponseSpec", "AssumptionsSpec",
-    "GoalCriterion", "RoadCriterion", "Expect", "NormalDist", "Parameter", "ParameterDeclarations", "Variant",
+    "GoalCriterion", "RoadCriterion", "R_NEAR_FLOOR", "R_NEAR_HEADWAY", "Expect", "NormalDist", "Parameter", "ParameterDeclarations", "Variant",
 ]
 
 KMH = 1.0 / 3.6  # [m/s] per km/h
@@ -42,6 +43,15 @@ DEFAULT_SENSOR_RANGE = 100.0
 detection range of an automotive camera, short of radar's 150–250 m. From 27 m/s (97 km/h) the
 ego stops within it at RSS's 4 m/s², so the paper's scenarios (at most 14 m/s) sense far more
 than they need; a faster scenario gets a ``twolevel check`` warning (YML431)."""
+R_NEAR_FLOOR = 10.0
+"""[m] The least default ``controller.r_near``: the paper's sensing radius."""
+R_NEAR_HEADWAY = 2.0
+"""[s] The default ``controller.r_near`` is the distance covered in this time headway (the
+two-second rule) at the fastest speed the scenario lets the ego drive (the highest limit on its
+route, capped by its desired speed, at least its start speed: :func:`twolevel.world.loader.fastest`),
+at least :data:`R_NEAR_FLOOR` and at most the sensing range: 10 m below 5 m/s, 27.8 m at 50 km/h,
+60 m at 30 m/s. (The paper's fixed 10 m is 0.3 s at motorway speed: a vehicle beside and ahead
+of the ego enters it too late for the rules to act on it.)"""
 IDM_V0_MAX = 120.0 * KMH  # [m/s] Treiber's desired speed, capped further by the lane's limit
 COORD_MAX = 1e6  # [m] largest |x|, |y| of any point (a map 2000 km across)
 TIME_MAX = 86_400.0  # [s] latest time in a light's script or a participant's waypoints (a day)
@@ -698,7 +708,10 @@ class ControllerSettings(_Model):
 
     H: Count = Field(default=10, ge=1, le=100, description="MPC horizon [steps]")
     dt: Number = Field(default=0.1, ge=0.01, le=1, description="control period [s]")
-    r_near: Number = Field(default=10.0, gt=0, le=200, description="sensing radius for nearby vehicles, signs, lights [m]")
+    r_near: Number | None = Field(default=None, gt=0, le=200,
+                                  description="sensing radius for nearby vehicles, signs, lights [m] (default: "
+                                              "R_NEAR_HEADWAY [s] at the fastest speed the scenario allows, "
+                                              "at least R_NEAR_FLOOR [m], at most the sensing range)")
     r: Number = Field(default=0.3, gt=0, le=10, description="radius of the ball sampled around u* by the low level [-]")
     D_safe: Number = Field(default=1.0, ge=0, le=50, description="collision_free distance at the high level [m]")
     samples: Count = Field(default=200, ge=0, le=10_000, description="low-level sampling budget [controls]")

@@ -21,7 +21,7 @@ from twolevel.world.conflicts import Junctions, build_junctions
 from twolevel.world.geometry import LaneSet, Route, concatenate, resample, step_index
 from twolevel.world.junction import Plan
 from twolevel.world.lanes import build_lanes
-from twolevel.world.loader import Scenario, _route_lanes, sensing_of, successors
+from twolevel.world.loader import Scenario, _route_lanes, near_radius, sensing_of, successors
 from twolevel.world.participants import participants_of, pose_of
 from twolevel.world.schema import ControllerSettings, LightCycle, MapFile
 from twolevel.world.speed_profile import Comfort, speed_profile
@@ -247,7 +247,7 @@ def build_world(scn: Scenario) -> World:
     assumptions = from_spec(spec.assumptions, {p.id: p.kind for p in spec.participants})
     ex, ey, epsi, elane, es, _ = pose_of(spec.ego.start, lanes, index)
     parts, traffic0 = participants_of(spec, lanes, index, assumptions, elane, es)
-    settings = Settings(c.H, c.dt, c.r_near, c.r, c.D_safe, c.samples, c.time_limit, c.solver, c.stop_speed,
+    settings = Settings(c.H, c.dt, near_radius(scn), c.r, c.D_safe, c.samples, c.time_limit, c.solver, c.stop_speed,
                         c.yellow_decel, spec.run.duration, spec.run.seed, c.horizon_s, c.coarse_dt,
                         None if c.coarse_steps is None else tuple(c.coarse_steps), c.rss, sense.range, sense.response,
                         sense.v_bound, comfort, c.v2i, (c.weights.u, c.weights.du, tuple(c.weights.track)))
