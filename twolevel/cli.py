@@ -397,7 +397,8 @@ def simulate(
 
     The run is judged against the scenario's pass criteria (expect:; by default: goal reached,
     on the road, no collision at fault, every rule holds). Exit 0 when every criterion is met,
-    1 when one is not, 2 on bad input or an interrupted/crashed run.
+    1 when one is not, 2 on bad input or an interrupted, crashed or aborted run (SUMO failing
+    mid-run: SIM632).
     """
     from pathlib import Path
 

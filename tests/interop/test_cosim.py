@@ -173,6 +173,41 @@ def test_missing_and_broken_sumo_files_are_diagnostics(tmp_path: Path) -> None:
     assert summary is None and "SIM631" in [d.code for d in diags]
 
 
+def test_sumo_failing_mid_run_aborts_the_run_with_a_diagnostic_and_keeps_its_steps(tmp_path: Path) -> None:
+    """A vehicle of the route files that SUMO cannot insert when it is due (faster than its type
+    allows, at 2 s): libsumo raises in that step. The run ends 'aborted' with SIM632 (SUMO's words,
+    the time, a hint naming the files), exit 2, no traceback; the 20 completed steps are readable
+    (trace, run.json, `twolevel monitor`)."""
+    from typer.testing import CliRunner
+
+    from twolevel.cli import app
+    from twolevel.monitor.tracefile import read_trace
+
+    routes = tmp_path / "late.rou.xml"
+    routes.write_text("<routes><vType id='car'/>"
+                      "<vehicle id='late' type='car' depart='2' departSpeed='200'><route edges='A0B0'/></vehicle>"
+                      "</routes>\n")
+    scenario = _scenario(tmp_path, traffic=f"routes: [{routes}]", duration=6.0)
+    res = CliRunner().invoke(app, ["simulate", str(scenario), "--out", str(tmp_path / "run")])
+    assert res.exit_code == 2, res.output
+    assert "Traceback" not in res.output and "Traceback" not in res.stderr
+    finding = next(ln for ln in res.stderr.splitlines() if "SIM632" in ln)
+    assert finding.startswith(f"{scenario}:1:1: SIM632 [error] the run was aborted after 20 steps (2 s)")
+    assert "Departure speed for vehicle 'late' is too high" in finding and "t = 2.1 s" in finding
+    meta = json.loads((tmp_path / "run" / "run.json").read_text())
+    assert meta["status"] == "aborted" and "traceback" not in meta and "'late'" in meta["error"]
+    assert meta["summary"]["steps"] == 20
+    trace, diags = read_trace(tmp_path / "run" / "trace.csv")
+    assert trace is not None and not diags and trace.samples == 20 and trace.t[-1] == pytest.approx(1.9)
+    mon = CliRunner().invoke(app, ["monitor", str(RULES / "speed_limit.stl"), str(tmp_path / "run" / "trace.csv")])
+    assert mon.exit_code == 0, mon.output
+    # the hint, in the library's diagnostic: SUMO's own run of the same files
+    summary, diags = simulate_scenario(str(scenario), str(tmp_path / "again"), frames=False, ttr_every=0)
+    assert summary is not None and summary.status.value == "aborted"
+    sim632 = [d for d in diags if d.code == "SIM632"]
+    assert len(sim632) == 1 and f"-r {routes}" in (sim632[0].hint or "") and str(tmp_path / "again") in sim632[0].hint
+
+
 def test_without_libsumo_sumo_traffic_says_how_to_install_it(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setitem(__import__("sys").modules, "libsumo", None)  # import libsumo raises ImportError
     summary, diags = simulate_scenario(str(_scenario(tmp_path)), str(tmp_path / "run"))

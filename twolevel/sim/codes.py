@@ -10,7 +10,7 @@ from twolevel.diagnostics import Code, Severity
 
 E, W, I = Severity.ERROR, Severity.WARNING, Severity.INFO
 
-__all__ = ["SIM610", "SIM611", "SIM612", "SIM613", "SIM614", "SIM615", "SIM616", "SIM617", "SIM618", "SIM630", "SIM631"]
+__all__ = ["SIM610", "SIM611", "SIM612", "SIM613", "SIM614", "SIM615", "SIM616", "SIM617", "SIM618", "SIM630", "SIM631", "SIM632"]
 
 SIM610 = Code("SIM610", "bad-controller", E, "The requested controller is not known or not available.")
 SIM611 = Code("SIM611", "bad-run-setting", E, "A run setting given on the command line is out of range.")
@@ -28,3 +28,6 @@ SIM618 = Code("SIM618", "rules-unsatisfiable", W, "For a while no plan satisfied
               "message names the rules that conflict and what the car did instead.")
 SIM630 = Code("SIM630", "sumo-unavailable", E, "SUMO traffic needs libsumo (pip install 'twolevel[sumo]').")
 SIM631 = Code("SIM631", "sumo-start-failed", E, "SUMO could not start with the scenario's network and routes.")
+SIM632 = Code("SIM632", "sumo-failed", E, "SUMO stopped with an error during the run (a vehicle, route or flow of its "
+              "files it could not insert or build when due): the run is aborted; every completed step is in the "
+              "trace.")

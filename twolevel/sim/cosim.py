@@ -16,21 +16,25 @@ x in radians. The scenario's own participants are stepped by the built-in traffi
 vehicles are leaders for them, they are not seen by SUMO).
 
 Deterministic for a seed: SUMO's ``--seed`` and the random trips' draws (numpy's generator).
+An error libsumo raises once SUMO runs (a vehicle of the route files it cannot insert when it is
+due, a route it cannot build) is a :class:`~twolevel.sim.traffic_engine.TrafficFailure` with
+SUMO's words and the time: the run ends ``aborted`` with SIM632, never a traceback.
 libsumo is one simulation per process: a new run closes the one before.
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
 from dataclasses import replace
-from typing import Any
+from typing import Any, Iterator
 
 import numpy as np
 
 from twolevel.diagnostics import Diagnostic, Span
 from twolevel.sim.codes import SIM630, SIM631
-from twolevel.sim.traffic_engine import BuiltinTraffic
+from twolevel.sim.traffic_engine import BuiltinTraffic, TrafficFailure
 from twolevel.world import traffic as tr
 from twolevel.world.participants import SLOT_PREFIX
 from twolevel.world.schema import SumoTraffic as SumoSpec
@@ -102,7 +106,11 @@ class SumoTraffic:
     def start(self, state: tr.TrafficState, ego: tr.EgoBox) -> tr.TrafficState:
         """Insert the ego where it starts (on the edge there), subscribe to the vehicles around it,
         and insert the random trips; the traffic at t = 0 is the world's (SUMO inserts its
-        vehicles in its first step)."""
+        vehicles in its first step). A failure of SUMO's is a :class:`TrafficFailure`."""
+        with self._failing_at(state.t):
+            return self._start(state, ego)
+
+    def _start(self, state: tr.TrafficState, ego: tr.EgoBox) -> tr.TrafficState:
         ls = self.ls
         tc = ls.constants
         fx, fy = front_of(ego.x, ego.y, ego.psi, ego.length)
@@ -131,7 +139,26 @@ class SumoTraffic:
     # ------------------------------------------------------------------------------ each step
     def step(self, state: tr.TrafficState, dt: float, ego: tr.EgoBox, ego_next: tr.EgoBox) -> tr.TrafficState:
         """The scenario's own participants by the built-in traffic, then the ego moved to
-        ``ego_next`` in SUMO, SUMO's step, and the vehicles near the ego into the slots."""
+        ``ego_next`` in SUMO, SUMO's step, and the vehicles near the ego into the slots. A failure
+        of SUMO's is a :class:`TrafficFailure`."""
+        with self._failing_at(state.t + dt):
+            return self._step(state, dt, ego, ego_next)
+
+    @contextlib.contextmanager
+    def _failing_at(self, t: float) -> Iterator[None]:
+        """libsumo's errors (TraCIException, FatalTraCIError) inside as a :class:`TrafficFailure`
+        at simulated time ``t`` [s], with what to check."""
+        try:
+            yield
+        except (self.ls.TraCIException, self.ls.FatalTraCIError) as exc:
+            files = " ".join(["-n", self.spec.net] + (["-r", ",".join(self.spec.routes)] if self.spec.routes else []))
+            raise TrafficFailure(
+                str(exc).strip() or type(exc).__name__, t,
+                f"SUMO rejected its network or route files when it reached t = {t:g} s; run them alone to see "
+                f"SUMO's own report (sumo {files} --end {math.ceil(t) + 1}) and fix the vehicle, route or "
+                "flow it names") from exc
+
+    def _step(self, state: tr.TrafficState, dt: float, ego: tr.EgoBox, ego_next: tr.EgoBox) -> tr.TrafficState:
         if self.first:
             state = BuiltinTraffic(self.world).step(state, dt, ego, ego_next)
         else:

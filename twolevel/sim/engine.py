@@ -106,7 +106,7 @@ from twolevel.models.actuation import gamma_from_accel
 from twolevel.models.params import VehicleParams
 from twolevel.models.rollout import rollout
 from twolevel.safety.verify import Verdict, context, time_to_react
-from twolevel.sim.codes import SIM610, SIM611, SIM612, SIM613, SIM614, SIM615, SIM616, SIM617, SIM618
+from twolevel.sim.codes import SIM610, SIM611, SIM612, SIM613, SIM614, SIM615, SIM616, SIM617, SIM618, SIM632
 from twolevel.sim.collisions import CollisionLog
 from twolevel.sim.extra_columns import ExtraColumns
 from twolevel.sim.frames import FrameWriter
@@ -115,7 +115,7 @@ from twolevel.sim.provenance import run_metadata
 from twolevel.sim.robustness import RuleColumns
 from twolevel.sim.summary import Collision, RunSummary, StepDecision, StepInfo, summarise
 from twolevel.sim.trace import BASE_COLUMNS, RunDirectory, RunStatus, TraceWriter
-from twolevel.sim.traffic_engine import BuiltinTraffic, TrafficEngine
+from twolevel.sim.traffic_engine import BuiltinTraffic, TrafficEngine, TrafficFailure
 from twolevel.sim.unsatisfiable import UnsatisfiableLog
 from twolevel.stl.typecheck import RuleSet
 from twolevel.world import traffic as tr
@@ -167,9 +167,10 @@ def simulate_scenario(
     after every step with a :class:`StepInfo`; if it raises ``KeyboardInterrupt`` the run stops
     as on Ctrl-C. ``frames``: also write ``frames.jsonl`` for the animation.
 
-    Returns the :class:`RunSummary` (``status`` complete / interrupted / crashed; None when the
-    scenario or its rules could not be loaded) and every diagnostic. Interruption and internal
-    errors are diagnostics (SIM612, SIM613), never tracebacks; the run directory keeps every
+    Returns the :class:`RunSummary` (``status`` complete / interrupted / crashed / aborted; None
+    when the scenario or its rules could not be loaded) and every diagnostic. Interruption,
+    internal errors and SUMO failing mid-run are diagnostics (SIM612, SIM613, SIM632), never
+    tracebacks; the run directory keeps every
     completed step and ``run.json`` says how it ended.
     """
     where = Span.whole_file(scenario_path)
@@ -420,6 +421,7 @@ class ClosedLoop:
         columns = (list(BASE_COLUMNS) + list(SIGNAL_COLUMNS) + list(EXTRA_COLUMNS) + list(self.extra.columns)
                    + [f"rob_{n}" for n in rule_names])
         status, error, unwritable = RunStatus.COMPLETE, "", False
+        failure: TrafficFailure | None = None
         self.t_wall0 = time.perf_counter()
         writer: TraceWriter | None = None
         fw_writer: FrameWriter | None = None
@@ -434,13 +436,16 @@ class ClosedLoop:
             status, error = RunStatus.INTERRUPTED, interruption.describe(getattr(exc, "signum", None))
         except OSError as exc:  # the disk is full, or the run directory went away
             status, error, unwritable = RunStatus.CRASHED, f"{type(exc).__name__}: {exc}", True
+        except TrafficFailure as exc:  # SUMO rejected its own files: the input's fault, not twolevel's
+            status, error, failure = RunStatus.ABORTED, f"SUMO failed at t = {exc.t:g} s: {exc.message}", exc
         except Exception as exc:  # an internal error: keep the run, say what happened
             status, error = RunStatus.CRASHED, f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}"
         with interruption.shielded():  # what was completed is written whatever arrives now
             try:
                 self.traffic.close()  # first: SUMO is closed whatever happens next
             except Exception as exc:  # libsumo's own failure: the run's files are still completed
-                status, error = RunStatus.CRASHED, error or f"{type(exc).__name__}: {exc}"
+                if status is not RunStatus.ABORTED:  # SUMO already failed: closing it may fail too
+                    status, error = RunStatus.CRASHED, error or f"{type(exc).__name__}: {exc}"
             summary, error, unwritable = self._finish(directory, writer, fw_writer, status, error, unwritable)
         if self.initial is not None and not self.initial.verified:
             why = "; ".join(str(r) for r in self.initial.refutations) or "no fail-safe"
@@ -453,6 +458,9 @@ class ClosedLoop:
         elif summary.status is RunStatus.INTERRUPTED:
             diags.append(SIM612(f"{error} after {summary.steps} steps ({summary.duration:g} s)", where,
                                 hint=f"the completed steps are in {out_dir}"))
+        elif summary.status is RunStatus.ABORTED and failure is not None:
+            diags.append(SIM632(f"the run was aborted after {summary.steps} steps ({summary.duration:g} s): {error}",
+                                where, hint=f"{failure.hint}; the completed steps are in {out_dir}"))
         elif summary.status is RunStatus.CRASHED:
             diags.append(SIM613(f"the run stopped after {summary.steps} steps: {error.splitlines()[0]}", where,
                                 hint=f"the completed steps are in {out_dir}; run.json has the traceback"))

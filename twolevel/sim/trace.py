@@ -99,6 +99,9 @@ class RunStatus(ValueEnum):
     CRASHED = "crashed"
     """Stopped on an internal error, or the run directory could not be written; the completed
     steps are kept and ``error`` says why."""
+    ABORTED = "aborted"
+    """Stopped because the co-simulated traffic failed (SUMO rejected its own network or route
+    files during the run, SIM632); the completed steps are kept and ``error`` says why."""
 
 
 class RunDirectory:

@@ -15,7 +15,18 @@ from typing import Protocol
 from twolevel.world import traffic as tr
 from twolevel.world.world import World
 
-__all__ = ["TrafficEngine", "BuiltinTraffic"]
+__all__ = ["TrafficEngine", "BuiltinTraffic", "TrafficFailure"]
+
+
+class TrafficFailure(Exception):
+    """An engine's own simulation stopped with an error during the run (SUMO rejecting a vehicle
+    of its route files when it is due, or failing on its network): ``message`` is the engine's
+    words, ``t`` [s] the simulated time of the step that failed, ``hint`` what to check. Not an
+    internal error: the run ends ``aborted`` with SIM632 (:mod:`twolevel.sim.engine`)."""
+
+    def __init__(self, message: str, t: float, hint: str) -> None:
+        super().__init__(message)
+        self.message, self.t, self.hint = message, t, hint
 
 
 class TrafficEngine(Protocol):
