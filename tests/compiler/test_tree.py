@@ -6,8 +6,10 @@ The trees are the ones stage 1 makes of random formulas over a double integrator
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from helpers.milp_systems import DT, H, PAST, T, double_integrator, random_formula
@@ -31,6 +33,7 @@ def check_invariants(t: Tree) -> None:
     assert isinstance(t, Op) and len(t.kids) >= 2, t
     floats = [k for k in t.kids if isinstance(k, float)]
     assert len(floats) <= 1, t                                   # constants folded
+    assert not any(math.isnan(f) for f in floats), t             # undefined robustness is MIL505, not a NaN
     assert all(abs(f) != INF for f in floats), t                 # no neutral, no absorbing child
     assert not any(isinstance(k, Op) and k.is_max == t.is_max for k in t.kids), t  # flat
     for k in t.kids:
@@ -49,20 +52,24 @@ def value(t: Tree, x: np.ndarray) -> float:
     return max(vals) if t.is_max else min(vals)
 
 
-def _trees(seed: int) -> tuple[list[Tree], ModelBuilder]:
+def _trees(seed: int) -> tuple[list[Tree], ModelBuilder, list[str]]:
     rng = np.random.default_rng(seed)
     b = ModelBuilder()
     _, _, _, sig = double_integrator(b, rng.uniform(-2, 2, PAST + 1), rng.uniform(-1, 1, PAST + 1))
     sig["c"] = rng.uniform(-2, 2, T)
     reqs = [Requirement(f"r{i}", random_formula(rng, 3), (PAST, PAST + 2)) for i in range(2)]
     enc = encode(b, reqs, sig, DT, stable=True)
-    return [tree for _, _, tree in enc.trees], b
+    return [tree for _, _, tree in enc.trees], b, [d.code for d in enc.diagnostics]
 
 
 @given(st.integers(0, 2**31 - 1))
 @settings(max_examples=150, deadline=None)
+@example(1072587383)  # always (true xor next ...): inf - inf at the last step, once a NaN tree
 def test_trees_of_random_formulas_keep_the_invariants_and_their_bounds(seed: int) -> None:
-    trees, b = _trees(seed)
+    trees, b, codes = _trees(seed)
+    if "MIL505" in codes:  # a robustness the oracle finds undefined too: reported, never a tree
+        assert trees == []
+        return
     rng = np.random.default_rng(seed)
     bounds = IntervalBounds(Box(b.lb.copy(), b.ub.copy()))
     lb, ub = b.lb, b.ub
@@ -73,6 +80,24 @@ def test_trees_of_random_formulas_keep_the_invariants_and_their_bounds(seed: int
             x = rng.uniform(np.maximum(lb, -1e3), np.minimum(ub, 1e3))
             v = value(t, x)
             assert lo - 1e-9 <= v <= hi + 1e-9, (t, lo, v, hi)
+
+
+def test_an_undefined_robustness_is_reported_at_the_formula_as_the_oracle_finds_it() -> None:
+    """``true xor next φ`` at the last step is |inf − inf| (RTAMT's xor): NaN for the offline
+    monitor, and MIL505 at the xor for the compiler — not a NaN tree that bounds nothing."""
+    from twolevel.monitor.robustness import robustness
+    from twolevel.stl.parser import parse
+
+    rf, _ = parse("input float p\nr = always (true xor next (p >= 0.5));\n", "r.stl")
+    f = rf.rules[0].formula
+    assert math.isnan(robustness(f, {"p": np.zeros(4)}, DT)[0])
+    b = ModelBuilder()
+    _, _, _, sig = double_integrator(b, np.zeros(PAST + 1), np.zeros(PAST + 1))
+    enc = encode(b, [Requirement("r", f, (PAST,))], sig, DT, stable=True)
+    assert [d.code for d in enc.diagnostics] == ["MIL505"] and enc.infeasible and not enc.trees
+    span = enc.diagnostics[0].span
+    assert (span.line, span.column) == (2, 13)  # the xor (its left side starts it)
+    assert "undefined" in enc.diagnostics[0].message
 
 
 def test_stage_one_alone_gives_the_trees_of_the_encoding() -> None:

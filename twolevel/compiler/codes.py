@@ -1,4 +1,4 @@
-"""Diagnostic codes of the STL → MILC compiler (``MIL501``–``MIL504``) and the error that carries them.
+"""Diagnostic codes of the STL → MILC compiler (``MIL501``–``MIL505``) and the error that carries them.
 
 Declared once here; each :class:`~twolevel.diagnostics.Code` registers itself. A rule the
 compiler cannot encode is bad input (``bad_input``: ``twolevel plan`` exits 2). A stage raises
@@ -11,7 +11,7 @@ from __future__ import annotations
 from twolevel.diagnostics import Code, Diagnostic, Severity, Span
 from twolevel.stl import ast
 
-__all__ = ["MIL501", "MIL502", "MIL503", "MIL504", "EncodeError", "NOWHERE", "span_of"]
+__all__ = ["MIL501", "MIL502", "MIL503", "MIL504", "MIL505", "EncodeError", "NOWHERE", "span_of"]
 
 MIL501 = Code("MIL501", "nonlinear-predicate", Severity.ERROR,
               "A predicate is not linear in the decision variables and cannot be encoded.", bad_input=True)
@@ -21,6 +21,9 @@ MIL503 = Code("MIL503", "rule-violated-by-constants", Severity.WARNING,
               "A rule is violated by signals known at solve time; no plan can satisfy it.")
 MIL504 = Code("MIL504", "unknown-name", Severity.ERROR,
               "A formula names a signal, constant, rule or built-in the encoder was not given.", bad_input=True)
+MIL505 = Code("MIL505", "undefined-robustness", Severity.ERROR,
+              "A formula's robustness is undefined (NaN: inf - inf, e.g. iff/xor of two sides both +inf), as the "
+              "offline monitor finds it (SIM607): it cannot be encoded.", bad_input=True)
 
 #: The span of a diagnostic about the rules as a whole (no single node to point at).
 NOWHERE = Span("<rules>")

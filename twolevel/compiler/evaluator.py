@@ -33,7 +33,7 @@ from typing import Callable, Mapping
 import numpy as np
 
 from twolevel.compiler.affine_block import vector_always
-from twolevel.compiler.codes import MIL501, MIL504, EncodeError, span_of
+from twolevel.compiler.codes import MIL501, MIL504, MIL505, EncodeError, span_of
 from twolevel.compiler.signals import TraceSignals
 from twolevel.compiler.tree import INF, IntervalBounds, Op, Parents, Tree, add, mk, negate, scale
 from twolevel.compiler.types import Builtin
@@ -126,6 +126,12 @@ class Evaluator:
         if hit is not None:
             return hit
         out = self._rob_new(node, t, s)
+        if isinstance(out, float) and math.isnan(out):  # the oracle's NaN: no tree, no bound, no verdict
+            raise EncodeError(MIL505(
+                f"the robustness of this formula at step {t} is undefined: a term is inf - inf (iff/xor of two "
+                "sides both infinite, or an infinite signal less itself)", span_of(node),
+                hint="the offline monitor finds it undefined too (SIM607); rewrite the formula so that no two "
+                     "infinite values are subtracted (e.g. iff/xor of 'true' or of 'next' at the horizon's end)"))
         if isinstance(out, Op):
             for k in out.kids:
                 self.parents.add(k)

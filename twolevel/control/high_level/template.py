@@ -29,6 +29,7 @@ import numpy as np
 
 from twolevel.compiler.affine_block import AffineBlock
 from twolevel.compiler.collision import CollisionBlock, collision_free_builtin
+from twolevel.compiler.codes import EncodeError
 from twolevel.compiler.evaluator import Evaluator
 from twolevel.compiler.signals import AffineSignal, TraceSignals
 from twolevel.compiler.tree import Block, Box, IntervalBounds, Op
@@ -133,7 +134,10 @@ def refresh(tpl: StepTemplate, step: StepData, rules: StepRules, settings: MPCSe
     it = iter(tpl.emissions)
     pids = participants_in(sigs)  # quantifiers over the participants in range, as the encoder expands them
     for req, kinds in zip(requirements, tpl.kinds):
-        p = _parts(ev.rob(expand_quantifiers(req.formula, pids), P, 1.0))
+        try:
+            p = _parts(ev.rob(expand_quantifiers(req.formula, pids), P, 1.0))
+        except EncodeError:  # e.g. undefined now (MIL505): the whole encoding reports it
+            return None
         if p is None or p[1] < eps or tuple(_kind(b) for b in p[0]) != kinds:
             return None
         for b in p[0]:
