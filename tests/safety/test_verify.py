@@ -190,3 +190,32 @@ def test_the_route_hint_does_not_change_the_verdict():
     b = verify_step(ctx, x0, KEEP, traffic, 0.0, s_hint=0.0)
     assert a.verified == b.verified and a.failsafe.name == b.failsafe.name
     assert np.array_equal(a.failsafe.controls, b.failsafe.controls)
+
+
+# ------------------------------------------------------------------- a bend: in its lane or not
+
+
+def _on_route(w, s: float, e: float, rel: float, v: float) -> np.ndarray:
+    """The ego's detailed state at route position ``s`` [m], lateral offset ``e`` [m] (left +),
+    heading ``rel`` [rad] off the route's, rolling at ``v`` [m/s]."""
+    from twolevel.models import fourwheel as fw
+
+    r = w.route
+    (x, y), h = r.position(np.array([s]))[0], float(r.heading_at(np.array([s]))[0])
+    return fw.initial_state(x - e * np.sin(h), y + e * np.cos(h), h + rel, v)
+
+
+@pytest.mark.parametrize("e, rel, back", [(-0.52, 0.126, False), (-0.3, 0.25, False), (-1.3, 0.126, True),
+                                          (0.6, -0.35, True)])
+def test_in_a_bend_the_box_is_judged_against_the_lane_under_each_corner(e, rel, back):
+    """Moving off into the right turn of maps/tee_junction.yaml (radius ~8 m): a box whose corners
+    all lie within the lane where each lies along the curving route is in its lane, and its
+    fail-safes brake or clear along the route — not steer "back in lane" towards a place past
+    the car far ahead in the lane it turns into (those were rolled out for hundreds of steps
+    each control step). Far enough off, it is out of its lane and the fail-safes steer back."""
+    w = world("scenarios/traffic/right_turn_stream.yaml")
+    ctx = context(w)
+    lead = place(w, w.traffic0, "from_left_3", "east_out", 20.0, v=11.0)  # ahead in the lane it turns into
+    v = verify_initial_state(ctx, _on_route(w, 56.0, e, rel, 3.0), lead, s_hint=56.0)
+    names = [r.failsafe for r in v.refutations] + ([v.failsafe.name] if v.failsafe else [])
+    assert names and all(n.endswith("back in lane") is back for n in names)

@@ -244,11 +244,14 @@ def _same(a: np.ndarray | None, b: np.ndarray | None) -> bool:
     return (a is None and b is None) or (a is not None and b is not None and np.array_equal(a, b))
 
 
-def _back(ctx: Context, traffic: TrafficState, s_ego: float, e_ego: float, psi: float, v_ego: float
+def _back(ctx: Context, traffic: TrafficState, s_ego: float, e_ego: float, pose: np.ndarray, v_ego: float
           ) -> tuple[float, float, float, float, float, np.ndarray] | None:
-    """Where a fail-safe must take the ego back to, when at route position ``s_ego`` [m] its
-    lateral offset ``e_ego`` [m], heading ``psi`` [rad] and speed ``v_ego`` [m/s] put its box so far out of the route's
-    lane (and the lanes running its way) that standing there would be standing on another lane:
+    """Where a fail-safe must take the ego back to, when at route position ``s_ego`` [m] with
+    lateral offset ``e_ego`` [m] and speed ``v_ego`` [m/s] its ``pose`` [X m, Y m, ψ rad] puts its
+    box so far out of the route's lane (and the lanes running its way) that standing there would be
+    standing on another lane — each corner of the box against the lane where that corner lies along
+    the route, so that in a bend (where the lane curves under the car) a box within its lane counts
+    as within it:
     (lateral offset of the route lane's centre [m], route position its centre must pass to be
     ahead of the vehicles in the route's lane it is beside or passing, within
     :data:`PASS_REACH`, with D_safe to spare, −inf when there are none; the lateral offset [m]
@@ -260,12 +263,13 @@ def _back(ctx: Context, traffic: TrafficState, s_ego: float, e_ego: float, psi: 
     speed up — the Vienna Convention on Road Traffic, art. 11(3), as the assumptions state,
     :mod:`twolevel.world.assumptions`). None: it is in its lane."""
     w, m = ctx.world, ctx.settings.margin
-    area = drivable_area(w.lanes, w.route, np.array([s_ego]), oncoming=False)
-    rel = float(psi - w.route.heading_at(np.array([s_ego]))[0])
-    extent = 0.5 * (ctx.params.length * abs(math.sin(rel)) + ctx.params.width * abs(math.cos(rel)))
+    corners = box_corners(pose[0], pose[1], pose[2], ctx.params.length, ctx.params.width)
+    near = 0.5 * math.hypot(ctx.params.length, ctx.params.width) + 1.0
+    s_c, e_c = w.route.project_near(corners, np.full(4, s_ego), near)
+    area = drivable_area(w.lanes, w.route, np.concatenate([[s_ego], s_c]), oncoming=False)
     lo, hi = float(area.same_lo[0]), float(area.same_hi[0])
     slack = m - FOREIGN_TOLERANCE + 0.05
-    if lo + extent + slack <= e_ego <= hi - extent - slack:
+    if np.all((area.same_lo[1:] + slack <= e_c) & (e_c <= area.same_hi[1:] - slack)):
         return None
     clear = 0.5 * ctx.params.width + slack
     lo, hi = lo + clear, hi - clear
@@ -473,11 +477,11 @@ def _verify(ctx: Context, x_start: np.ndarray, prefix: np.ndarray, traffic: Traf
     s, e = _route_state(ctx, x_start, s_hint)
     now = _route_state(ctx, prefix[0], s_hint) if len(prefix) else (s, e)
     follower, protected = _excluded(ctx, traffic, *now)
-    back = _back(ctx, traffic, s, e, float(x_start[2]), float(x_start[3]))
+    back = _back(ctx, traffic, s, e, x_start[:3], float(x_start[3]))
     fs, refuted, pred, stood = _first_safe(ctx, x_start, prefix, traffic, t, tm, pred, follower, protected, s, back)
     if fs is None and back is None and stood is not None:
         s_at, e_at = _route_state(ctx, stood, s)
-        back = _back(ctx, traffic, s_at, e_at, float(stood[2]), float(x_start[3]))
+        back = _back(ctx, traffic, s_at, e_at, stood[:3], float(x_start[3]))
         if back is not None:
             fs, more, pred, _ = _first_safe(ctx, x_start, prefix, traffic, t, tm, pred, follower, protected, s, back)
             refuted += more
