@@ -25,35 +25,35 @@ ROOT = Path(__file__).resolve().parents[2]
 TRAFFIC = ROOT / "scenarios" / "traffic"
 
 
-def _monitored(trace_csv: Path, c: dict[str, np.ndarray], holds: bool = True) -> None:
-    """``twolevel monitor rules/right_of_way.stl`` on the trace: both rules hold at every sample
-    (``holds``; else it may report a violation), and its robustness series are the run's own
-    ``rob_`` columns."""
+def _monitored(trace_csv: Path, c: dict[str, np.ndarray]) -> None:
+    """``twolevel monitor rules/right_of_way.stl`` on the trace: both rules hold at every sample,
+    and its robustness series are the run's own ``rob_`` columns."""
     r = CliRunner().invoke(app, ["monitor", str(ROOT / "rules" / "right_of_way.stl"), str(trace_csv),
                                  "--format", "json", "--series"])
-    assert r.exit_code == (0 if holds else r.exit_code), r.output
+    assert r.exit_code == 0, r.output
     for rule in json.loads(r.output)["rules"]:
         series = np.array([np.inf if v == "inf" else v for v in rule["series"]], dtype=float)
         np.testing.assert_allclose(series, c[f"rob_{rule['name']}"], rtol=1e-6, atol=1e-6)
 
 
-def _run(tmp_path: Path, name: str, holds: bool = True) -> dict[str, np.ndarray]:
+def _run(tmp_path: Path, name: str) -> dict[str, np.ndarray]:
     path = TRAFFIC / f"{name}.yaml"
     run_dir = judged_run(path, tmp_path / name)  # goal, no collision at fault, the rules
     trace, _ = read_trace(str(run_dir / "trace.csv"))
     assert trace is not None
     out = {k: np.asarray(v, float) for k, v in trace.columns.items()}
     out["t"] = np.asarray(trace.t, float)
-    _monitored(run_dir / "trace.csv", out, holds)
+    _monitored(run_dir / "trace.csv", out)
     return out
 
 
-def _brief_clear_junction_breach(c: dict[str, np.ndarray]) -> None:
-    """Moving off from the line into a turn, clear_junction (4 m/s or 1 m/s² more inside) is
-    breached for at most 1.5 s (the executed acceleration drops below 1 m/s² for a step or two
-    while slower than 4 m/s; the scenarios' comments): a known shortfall, bounded here."""
-    bad = c["rob_clear_junction"] < 0
-    assert bad.sum() * (c["t"][1] - c["t"][0]) <= 1.5 + 1e-9 and c["rob_clear_junction"].min() >= -1.0 - 1e-9
+def _moves_off_briskly(c: dict[str, np.ndarray], v_go: float = 4.0, a_go: float = 1.0) -> None:
+    """Moving off from the line into the turn, every executed acceleration inside the area is at
+    least a_go until the speed is v_go (clear_junction at every sample; the low level used to run
+    the fail-safe, keeping its speed, when a correction of the plan did not verify)."""
+    inside = (c["d_zone"] <= 0) & (c["d_zone_out"] > 0)
+    assert inside.any() and (c["rob_clear_junction"] >= 0).all()
+    assert not (inside & (c["v"] < v_go) & (c["a"] < a_go)).any()
 
 
 def _check_gaps(c: dict[str, np.ndarray], margin: float = 1.5) -> tuple[np.ndarray, np.ndarray]:
@@ -107,8 +107,8 @@ def test_blocked_exit_is_not_entered(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_right_turn_merges_behind_the_stream_from_the_left(tmp_path: Path) -> None:
-    c = _run(tmp_path, "right_turn_stream", holds=False)
-    _brief_clear_junction_breach(c)
+    c = _run(tmp_path, "right_turn_stream")
+    _moves_off_briskly(c)
     inside, waiting = _check_gaps(c)
     assert waiting.sum() >= 10
     first_in = int(np.flatnonzero(inside)[0])
@@ -134,8 +134,8 @@ def test_the_nmpc_baseline_waits_in_its_lane(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_merge_behind_a_cyclist_after_a_pedestrian(tmp_path: Path) -> None:
-    c = _run(tmp_path, "merge_cyclist", holds=False)
-    _brief_clear_junction_breach(c)
+    c = _run(tmp_path, "merge_cyclist")
+    _moves_off_briskly(c)
     inside, waiting = _check_gaps(c)
     first_in = int(np.flatnonzero(inside)[0])
     # it gave way to the cyclist and to the car on the priority road: in after both had passed

@@ -16,7 +16,9 @@ Each step, given the MPC's optimal controls u* = [δ, a] over the horizon:
    verified first; when it does not verify the plan is unsafe and the step is an emergency:
    the fail-safe verified earlier runs at once (decision ``failsafe``), nothing is sampled. When
    it verifies and the rules hold, it runs; when the rules chose another control (a candidate,
-   the brake), that one is verified in turn, and runs if it verifies, else the fail-safe does.
+   the brake), that one is verified in turn, and runs if it verifies; else, for a candidate
+   (a correction of u* within the ball), u*_0 — verified — runs (decision ``mpc``, the rules it
+   breaks on the prediction recorded), and for the brake the fail-safe does.
    So a control runs only if a fail-safe after it was verified, whatever the planner and
    whichever rules the scenario lists. With the layer on, sampling is cut to its first round
    (``safety_rounds``; :mod:`twolevel.control.low_level.sampling`): no step spends the whole
@@ -141,6 +143,13 @@ class LowLevelController:
             return self._done(action, choice, sampled.tried, mpc_rob, intended, OFF, tm, t_start)
         again = first if np.array_equal(choice.control, mpc.control) else self._verify(x0, choice.control, traffic,
                                                                                       t, s0, tm)
+        if not again.verified and action is not Action.BRAKE:
+            # a correction of u* that does not verify: u*'s own first command, verified, is the
+            # nearest safe control to it — not the fail-safe (keeping its speed inside a junction,
+            # it broke clear_junction at once while u* was still speeding up to leave)
+            why = str(again.refuted_by) if again.refuted_by is not None else ""
+            return self._done(Action.MPC, mpc, sampled.tried, mpc_rob, intended,
+                              self._first(replace(guard.commit(first), refuted=why), first), tm, t_start)
         if not again.verified:
             return self._fall_back(x0, u_star, choice, again, sampled.tried, mpc_rob, intended, tm, t_start, first)
         return self._done(action, choice, sampled.tried, mpc_rob, intended, self._first(guard.commit(again), first), tm,

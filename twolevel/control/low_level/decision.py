@@ -16,7 +16,8 @@ class Action(ValueEnum):
     """Which control the low level applied (the trace's ``decision``)."""
 
     MPC = "mpc"
-    """u*, the MPC's first control: every rule holds on the detailed prediction."""
+    """u*, the MPC's first control: every rule holds on the detailed prediction — or, with the
+    safety layer, the candidate the rules chose instead did not verify while u*_0 did."""
     SAMPLED = "sampled"
     """The best-cost candidate of the ball around u* that satisfies every rule."""
     BRAKE = "brake"
@@ -24,8 +25,8 @@ class Action(ValueEnum):
     LEAST_VIOLATION = "least_violation"
     """The least-violating choice (u* or a candidate) of a standing car, where braking is worse."""
     FAILSAFE = "failsafe"
-    """The fail-safe verified at an earlier step, one step further: the control the rules chose
-    (u*, a candidate or the brake) did not verify (:mod:`twolevel.control.low_level.guard`)."""
+    """The fail-safe verified at an earlier step, one step further: u* did not verify, or the
+    rules chose the brake and it did not (:mod:`twolevel.control.low_level.guard`)."""
 
 
 @dataclass(frozen=True, eq=False)
