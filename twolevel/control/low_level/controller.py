@@ -17,8 +17,9 @@ Each step, given the MPC's optimal controls u* = [δ, a] over the horizon:
    the fail-safe verified earlier runs at once (decision ``failsafe``), nothing is sampled. When
    it verifies and the rules hold, it runs; when the rules chose another control (a candidate,
    the brake), that one is verified in turn, and runs if it verifies; else, for a candidate
-   (a correction of u* within the ball), u*_0 — verified — runs (decision ``mpc``, the rules it
-   breaks on the prediction recorded), and for the brake the fail-safe does.
+   (a correction of u* within the ball), u*_0 — verified — runs when it breaks the rules no
+   more than the fail-safe would over the horizon (decision ``mpc``, the rules it breaks on the
+   prediction recorded), and otherwise, or for the brake, the fail-safe does.
    So a control runs only if a fail-safe after it was verified, whatever the planner and
    whichever rules the scenario lists. With the layer on, sampling is cut to its first round
    (``safety_rounds``; :mod:`twolevel.control.low_level.sampling`): no step spends the whole
@@ -143,10 +144,10 @@ class LowLevelController:
             return self._done(action, choice, sampled.tried, mpc_rob, intended, OFF, tm, t_start)
         again = first if np.array_equal(choice.control, mpc.control) else self._verify(x0, choice.control, traffic,
                                                                                       t, s0, tm)
-        if not again.verified and action is not Action.BRAKE:
-            # a correction of u* that does not verify: u*'s own first command, verified, is the
-            # nearest safe control to it — not the fail-safe (keeping its speed inside a junction,
-            # it broke clear_junction at once while u* was still speeding up to leave)
+        if not again.verified and action is not Action.BRAKE and self._plan_breaks_less(x0, mpc, judge):
+            # a correction of u* that does not verify: u*'s own first command verified, and it
+            # breaks the rules less than the kept fail-safe would (which, keeping its speed inside
+            # a junction, broke clear_junction at once while u* was still speeding up to leave)
             why = str(again.refuted_by) if again.refuted_by is not None else ""
             return self._done(Action.MPC, mpc, sampled.tried, mpc_rob, intended,
                               self._first(replace(guard.commit(first), refuted=why), first), tm, t_start)
@@ -182,6 +183,21 @@ class LowLevelController:
             return self._done(Action.BRAKE, brake, tried, mpc_rob, intended, safety, tm, t_start)
         run = Choice(choice.worst, u, self._accel(float(u[1]), x0), choice.robustness, choice.states)
         return self._done(Action.FAILSAFE, run, tried, mpc_rob, intended, safety, tm, t_start)
+
+    def _plan_breaks_less(self, x0: np.ndarray, mpc: Choice, judge: Judge) -> bool:
+        """Whether u* (verified) breaks the rules no more on the detailed prediction (its worst
+        robustness is at least as high) than the fail-safe the guard would run from ``x0``
+        over the next H steps (its own states: replayed, it reproduces them; standing after its
+        end); True when there is none to run."""
+        assert self.guard is not None
+        fs, k = self.guard.kept, self.guard.k
+        if fs is None or not self.guard.on_track(x0):
+            return True
+        states = fs.states[np.minimum(np.arange(k, k + self.H + 1), fs.steps)]
+        u = np.array([fs.control_at(k + j) for j in range(self.H)])  # H commands, the held brake after its end
+        accel = accel_from_gamma(u[:, 1], np.maximum(states[:-1, 3], 0.0), self.params)
+        rob = judge(states[None], accel[None], u[None, :, 0])
+        return mpc.worst >= min((float(v[0]) for v in rob.values()), default=np.inf)
 
     def _accel(self, gamma: float, x0: np.ndarray) -> float:
         """The acceleration [m/s²] γ commands at the car's speed (quasi-static)."""

@@ -17,7 +17,8 @@ class Action(ValueEnum):
 
     MPC = "mpc"
     """u*, the MPC's first control: every rule holds on the detailed prediction — or, with the
-    safety layer, the candidate the rules chose instead did not verify while u*_0 did."""
+    safety layer, the candidate the rules chose instead did not verify while u*_0 did, and u*
+    breaks the rules no more than the kept fail-safe would."""
     SAMPLED = "sampled"
     """The best-cost candidate of the ball around u* that satisfies every rule."""
     BRAKE = "brake"
@@ -26,7 +27,8 @@ class Action(ValueEnum):
     """The least-violating choice (u* or a candidate) of a standing car, where braking is worse."""
     FAILSAFE = "failsafe"
     """The fail-safe verified at an earlier step, one step further: u* did not verify, or the
-    rules chose the brake and it did not (:mod:`twolevel.control.low_level.guard`)."""
+    control the rules chose did not and u* breaks the rules more than the fail-safe
+    (:mod:`twolevel.control.low_level.guard`)."""
 
 
 @dataclass(frozen=True, eq=False)

@@ -102,15 +102,23 @@ class Guard:
         self.kept, self.k = v.failsafe, 0
         return Check(Outcome.VERIFIED, v.failsafe.name)
 
+    def on_track(self, x0: np.ndarray) -> bool:
+        """Whether the kept fail-safe can run from ``x0`` now: there is one, and ``x0`` is its
+        state for this step within :data:`DRIFT` (or it has ended: it holds the brake)."""
+        fs = self.kept
+        if fs is None:
+            return False
+        if self.k > fs.steps:
+            return True
+        return bool(np.all(np.abs(np.asarray(x0[:4], dtype=float) - fs.states[self.k, :4]) <= DRIFT))
+
     def fall_back(self, x0: np.ndarray, refuted: Verdict | None) -> tuple[np.ndarray | None, Check]:
         """The kept fail-safe's command for now (and the step moves on), or None when there is
         none for the state ``x0`` (:data:`DRIFT`); ``refuted``: the verdict that failed."""
         why = str(refuted.refuted_by) if refuted is not None and refuted.refuted_by is not None else ""
+        if not self.on_track(x0):
+            self.kept = None
         fs = self.kept
-        if fs is not None and self.k <= fs.steps:
-            here = np.abs(np.asarray(x0[:4], dtype=float) - fs.states[self.k, :4])
-            if not np.all(here <= DRIFT):
-                fs = self.kept = None
         if fs is None:
             return None, Check(Outcome.UNVERIFIED, "", why)
         u = fs.control_at(self.k)
