@@ -136,6 +136,9 @@ def test_the_nmpc_baseline_waits_in_its_lane(tmp_path: Path) -> None:
 def test_merge_behind_a_cyclist_after_a_pedestrian(tmp_path: Path) -> None:
     c = _run(tmp_path, "merge_cyclist")
     _moves_off_briskly(c)
+    # behind the cyclist a refused correction gives way to the fail-safe (braking), not to a plan
+    # that would close in on the cyclist: the collision rule (D_safe) held throughout
+    assert (c["rob_no_collision"] >= 0).all()
     inside, waiting = _check_gaps(c)
     first_in = int(np.flatnonzero(inside)[0])
     # it gave way to the cyclist and to the car on the priority road: in after both had passed
