@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from helpers.safety_worlds import ego_on, place, world
+from twolevel.models import fourwheel as fw
 from twolevel.models.rollout import rollout
 from twolevel.safety.verify import context, time_to_react, verify_initial_state, verify_step
 
@@ -198,8 +199,6 @@ def test_the_route_hint_does_not_change_the_verdict():
 def _on_route(w, s: float, e: float, rel: float, v: float) -> np.ndarray:
     """The ego's detailed state at route position ``s`` [m], lateral offset ``e`` [m] (left +),
     heading ``rel`` [rad] off the route's, rolling at ``v`` [m/s]."""
-    from twolevel.models import fourwheel as fw
-
     r = w.route
     (x, y), h = r.position(np.array([s]))[0], float(r.heading_at(np.array([s]))[0])
     return fw.initial_state(x - e * np.sin(h), y + e * np.cos(h), h + rel, v)

@@ -144,9 +144,9 @@ class LowLevelController:
             return self._done(action, choice, sampled.tried, mpc_rob, intended, OFF, tm, t_start)
         again = first if np.array_equal(choice.control, mpc.control) else self._verify(x0, choice.control, traffic,
                                                                                       t, s0, tm)
-        if not again.verified and action is not Action.BRAKE and self._plan_breaks_less(x0, mpc, judge):
+        if not again.verified and action is not Action.BRAKE and self._plan_no_worse(x0, mpc, judge):
             # a correction of u* that does not verify: u*'s own first command verified, and it
-            # breaks the rules less than the kept fail-safe would (which, keeping its speed inside
+            # breaks the rules no more than the kept fail-safe would (which, keeping its speed in
             # a junction, broke clear_junction at once while u* was still speeding up to leave)
             why = str(again.refuted_by) if again.refuted_by is not None else ""
             return self._done(Action.MPC, mpc, sampled.tried, mpc_rob, intended,
@@ -184,7 +184,7 @@ class LowLevelController:
         run = Choice(choice.worst, u, self._accel(float(u[1]), x0), choice.robustness, choice.states)
         return self._done(Action.FAILSAFE, run, tried, mpc_rob, intended, safety, tm, t_start)
 
-    def _plan_breaks_less(self, x0: np.ndarray, mpc: Choice, judge: Judge) -> bool:
+    def _plan_no_worse(self, x0: np.ndarray, mpc: Choice, judge: Judge) -> bool:
         """Whether u* (verified) breaks the rules no more on the detailed prediction (its worst
         robustness is at least as high) than the fail-safe the guard would run from ``x0``
         over the next H steps (its own states: replayed, it reproduces them; standing after its
