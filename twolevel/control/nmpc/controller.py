@@ -59,7 +59,7 @@ import numpy as np
 
 from twolevel.control.codes import MIL515, MIL530
 from twolevel.control.high_level.guards import stop_lines
-from twolevel.control.high_level.right_of_way import MPC_ZONE_PATTERNS, gap_rule, give_way_line
+from twolevel.control.high_level.right_of_way import CLEAR_ACCEL, MPC_ZONE_PATTERNS, RUN_UP, gap_rule, give_way_line
 from twolevel.control.high_level.linearisation import StepData, prepare_step, sensing_bound
 from twolevel.control.high_level.settings import MPCSettings
 from twolevel.control.high_level.steering import steering_reference
@@ -88,8 +88,9 @@ class NmpcOptions:
     four-wheel model (None: its own h_int); ``expand``: build the NLP as one SX graph (None:
     kinematic yes, four-wheel no — expanding it takes ≈ 6 s to build, solves ≈ 2× faster);
     ``stop_margin`` [m]: how far before a stop line the ego's point must stay; ``stop_decel``
-    [m/s²]: the deceleration in the can-still-stop term of the stop-line bound (None: half the
-    bicycle's |a_min|)."""
+    [m/s²]: the deceleration in the can-still-stop term of the stop-line bound (None: the
+    bicycle's |a_min|); ``stop_slack`` [m]: a line the ego's point has passed is still kept
+    (moved to where full braking stops it) while that is at most this far past it."""
 
     max_obstacles: int = 6
     max_iter: int = 30
@@ -102,6 +103,7 @@ class NmpcOptions:
     expand: bool | None = None
     stop_margin: float = 0.0
     stop_decel: float | None = None
+    stop_slack: float = 0.5
 
 
 @dataclass(frozen=True, eq=False)
@@ -225,21 +227,14 @@ class NmpcController:
             vb = np.maximum(hc.v_max[1:], float(x0[3]) + self.params.a_min * dt * k + 0.05)
         ws = self.world.settings  # what the ego can stop from within its sensing range
         vb = np.minimum(vb, sensing_bound(float(x0[3]), np.arange(H + 1), dt, ws.v_sense, ws.response.brake_min))
-        # stop lines: the nearest line that applies at step k (inf: none)
-        s_line = stop_lines(hc, stop=self.stop, light=self.light)[1:]  # the high level's definition
-        if self.give_way:  # right of way: wait where the high level's give-way line is, while it holds
-            s_line = np.minimum(s_line, give_way_line(step.zones))
         stop = np.tile([0.0, 0.0, 1.0, 0.0], (H, 1))
-        decel = self.options.stop_decel or abs(self.params.a_min)
-        act = np.isfinite(s_line)
-        if act.any():
-            sl = s_line[act]
-            h = route.heading_at(sl)
-            n = np.stack([np.cos(h), np.sin(h)], axis=1)
-            b = np.einsum("ij,ij->i", n, route.position(sl)) - self.options.stop_margin
-            behind = n @ x0[:2] <= b + 1e-9  # a line already passed cannot be kept
-            c = np.where(np.flatnonzero(act) == H - 1, 0.5 / decel, 0.0)  # terminal: can still stop
-            stop[np.flatnonzero(act)[behind]] = np.column_stack([n, b, c])[behind]
+        kept, s_stop, rows = self._lines(step, x0)
+        if kept.size:
+            stop[kept] = rows
+            # aimed where the reference stops (settings.stop_margin before the line), the
+            # position bound at the line itself is never pressed
+            s_stop = float(np.min(s_stop)) - self.settings.stop_margin
+            vb[kept] = np.minimum(vb[kept], self._line_speeds(float(step.s_ref[0]), float(x0[3]), s_stop)[kept])
         N = self.problem.N
         centres = np.tile(x0[:2] + _FAR, (N, H, 1))
         shapes = np.tile([1.0, 0.0, 1.0, 1.0], (N, 1))
@@ -259,6 +254,100 @@ class NmpcController:
             ref = step.steer_ref[:H]
             steer = np.column_stack([ref, np.concatenate([before, ref[:-1]]), step.steer_weight[:H]])
         return self.problem.layout.pack(x0, step.u_prev, step.omega, vb, stop, centres, shapes, steer)
+
+    def _lines(self, step: StepData, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The lines the plan stops at: the steps (0-based indices into 1..H) where one applies
+        and the ego's point is still behind it, its route position less ``options.stop_margin``
+        [m] at each, and the stop block's rows (n_x, n_y, b, c) there (see
+        :mod:`twolevel.control.nmpc.nlp`)."""
+        H = self.settings.H
+        route = self.world.route
+        # stop lines: the nearest line that applies at step k (inf: none)
+        s_line = stop_lines(step.hc, stop=self.stop, light=self.light)[1:]  # the high level's definition
+        if self.give_way:  # right of way: wait where the high level's give-way line is, while it holds
+            s_line = np.minimum(s_line, give_way_line(step.zones))
+        if route.v_des.size and route.v_des[-1] <= 1e-9:  # the route stops at its goal
+            s_line = np.minimum(s_line, float(route.s[-1]))
+        act = np.flatnonzero(np.isfinite(s_line))
+        sl = s_line[act]
+        h = route.heading_at(sl)
+        n = np.stack([np.cos(h), np.sin(h)], axis=1).reshape(-1, 2)
+        b = np.einsum("ij,ij->i", n, route.position(sl).reshape(-1, 2)) - self.options.stop_margin
+        # where full braking stops the ego's point: the model's speed cannot go below 0 within a
+        # period, so it still rolls up to v·dt/2 more than v²/(2·|a_min|)
+        v0 = max(float(x0[3]), 0.0)
+        ahead = n @ x0[:2]
+        over = np.maximum(ahead + 0.5 * v0 * (v0 / abs(self.params.a_min) + self.settings.dt) - b, 0.0)
+        # a line already passed cannot be kept, unless the ego stops within options.stop_slack
+        # of it; a line it can stop no nearer to than that moves to where it stops (standing a
+        # few millimetres past it, the ego still waits there instead of driving into the
+        # junction, and the plan stays feasible)
+        near = over <= self.options.stop_slack
+        kept = (ahead <= b + 1e-9) | near
+        over = np.where(near, over, 0.0)
+        b = b + over
+        decel = self.options.stop_decel or abs(self.params.a_min)
+        c = np.where(act == H - 1, 0.5 / decel, 0.0)  # terminal: can still stop
+        rows = np.column_stack([n, b, c])[kept]
+        return act[kept], (sl - self.options.stop_margin + over)[kept], rows
+
+    def _launch(self, step: StepData, x0: np.ndarray) -> np.ndarray | None:
+        """(H,) [m/s²] The least acceleration at each step when the ego moves off into a conflict
+        area (None: no bound): :data:`~twolevel.control.high_level.right_of_way.CLEAR_ACCEL`
+        while the speed it gives stays below the rule's least speed inside (``GapRule.speed``,
+        v_go), once the give-way line has let the ego go, from its waiting place until its rear
+        has left the area, and no line before the area's exit stops it.
+
+        The give-way line lets the ego go when it can clear the area at CLEAR_ACCEL before any
+        vehicle with priority could arrive (the safety layer's clearing fail-safe); the paper's
+        cost launches at ~0.86 m/s² (a² weighs as much as the speed's tracking error), so the
+        ego fell behind that schedule inside the area, the verifier refuted clearing and braked
+        it to a stop in the junction (rules/right_of_way.stl's clear_junction: v ≥ v_go or
+        a ≥ a_go there)."""
+        zc = step.zones
+        if not self.give_way or zc is None or not math.isfinite(zc.s_in) or zc.waiting():
+            return None
+        half = 0.5 * zc.length
+        if not zc.s_in - half - 2.0 * RUN_UP <= zc.s0 < zc.s_out + half:
+            return None  # not at its waiting place, or out of the area
+        if np.any(self._lines(step, x0)[1] < zc.s_out + half):
+            return None  # a line stops it before it is through
+        H, dt = self.settings.H, self.settings.dt
+        slow = float(x0[3]) + CLEAR_ACCEL * dt * np.arange(H) < zc.gap.speed
+        if not slow.any():
+            return None
+        return np.where(slow, CLEAR_ACCEL, self.params.a_min)
+
+    def _line_speeds(self, s0: float, v0: float, s_stop: float) -> np.ndarray:
+        """(H,) [m/s] The speed bound at steps 1..H of a line the plan stops at, ``s_stop`` [m]
+        (route position), from the ego at (``s0`` [m], ``v0`` [m/s]): the speeds of a profile
+        that accelerates at the bicycle's a_max while it can still stop before ``s_stop``
+        braking at D, then brakes at D (each step's end speed w such that
+        s + (v + w)·dt/2 + w²/(2·D) ≤ s_stop, the exact distances of constant accelerations),
+        never below what full braking allows. D is the larger of ``settings.stop_decel`` and what
+        stopping from (``s0``, ``v0``) needs, at most the bicycle's |a_min|. A plan never faster
+        than the profile is never ahead of it, so the bound needs no guess of the plan's
+        positions.
+
+        A line is a speed limit falling to 0 at it: a bound on the plan's positions alone (the
+        stop block of :mod:`twolevel.control.nmpc.nlp`) the paper's cost meets by steering
+        away from the route (braking 1 m/s² harder over the horizon costs more than turning a
+        few tenths of a radian), and the plan slid sideways along the line or turned across it
+        (at the 4-way stop 0.6 m off its lane and 0.1 rad askew, after which the safety layer
+        found no fail-safe to move off with). Steering does not lower a speed."""
+        H, dt = self.settings.H, self.settings.dt
+        a_min, a_max = abs(self.params.a_min), self.params.a_max
+        room = s_stop - s0
+        decel = min(max(self.settings.stop_decel, v0 * v0 / (2.0 * room) if room > 1e-3 else a_min), a_min)
+        out = np.empty(H)
+        s, v = s0, max(v0, 0.0)
+        for k in range(H):  # H scalar steps
+            r = s_stop - s - 0.5 * v * dt
+            w = math.sqrt((0.5 * decel * dt) ** 2 + 2.0 * decel * r) - 0.5 * decel * dt if r > 0.0 else 0.0
+            w = max(min(w, v + a_max * dt), v - a_min * dt, 0.0)
+            s += 0.5 * (v + w) * dt
+            out[k] = v = w
+        return np.maximum(out, v0 - a_min * dt * np.arange(1, H + 1) + 0.05)
 
     def _initial_guess(self, t: float, step: StepData, x0: np.ndarray
                        ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, str]:
@@ -296,8 +385,9 @@ class NmpcController:
         tm["prepare"] = (t1 - t0) * 1e3
         p = self.parameters(step, x0)
         w0, lg, lx, how = self._initial_guess(t, step, x0)
+        a_low = self._launch(step, x0)
         tm["parameters"] = (time.perf_counter() - t1) * 1e3
-        sol = self.problem.solve(w0, p, lg, lx, retry=self.options.retry)
+        sol = self.problem.solve(w0, p, lg, lx, retry=self.options.retry, a_low=a_low)
         self.last = sol
         tm["solve"] = sol.solve_ms
         pr = self.problem

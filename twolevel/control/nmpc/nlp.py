@@ -258,8 +258,10 @@ class NmpcProblem:
         return w[: H * nx].reshape(H, nx), w[H * nx:].reshape(H, 2)
 
     def solve(self, w0: np.ndarray, p: np.ndarray, lam_g0: np.ndarray | None = None,
-              lam_x0: np.ndarray | None = None, retry: bool = True) -> NlpSolution:
+              lam_x0: np.ndarray | None = None, retry: bool = True, a_low: np.ndarray | None = None) -> NlpSolution:
         """One IPOPT solve from ``w0``; with duals given, IPOPT's warm-start initialisation is used.
+        ``a_low`` (H,) [m/s²]: the least acceleration at each step, this solve only (None: the
+        bicycle's a_min).
         With the exact Hessian first; if that fails and ``retry``, again from the same point with
         the limited-memory (L-BFGS) Hessian, which gets through the saddle-like points the exact
         Hessian crawls at (a stop line ahead with the tracking cost pulling forward), and if that
@@ -268,11 +270,15 @@ class NmpcProblem:
         sudden swerve (a stopped vehicle entering the 1 s horizon) takes the exact Hessian ≈ 35
         iterations. Iterations and time add up. Numerical failures come back as an unsuccessful :class:`NlpSolution`,
         never raised."""
-        tries = [self._attempt(w0, p, lam_g0, lam_x0, *LADDER[0])]
+        lbx = self.lbx
+        if a_low is not None:
+            lbx = lbx.copy()
+            lbx[self.H * self.nx + 1::2] = np.maximum(lbx[self.H * self.nx + 1::2], a_low)
+        tries = [self._attempt(w0, p, lam_g0, lam_x0, *LADDER[0], lbx=lbx)]
         for rung in LADDER[1:] if retry else ():
             if tries[-1].success:
                 break
-            tries.append(self._attempt(w0, p, lam_g0, lam_x0, *rung))
+            tries.append(self._attempt(w0, p, lam_g0, lam_x0, *rung, lbx=lbx))
         if len(tries) == 1:
             return tries[0]
         last = tries[-1]
@@ -281,9 +287,10 @@ class NmpcProblem:
                            tuple(a.status for a in tries))
 
     def _attempt(self, w0: np.ndarray, p: np.ndarray, lam_g0: np.ndarray | None, lam_x0: np.ndarray | None,
-                 lbfgs: bool, long: bool = False) -> NlpSolution:
+                 lbfgs: bool, long: bool = False, lbx: np.ndarray | None = None) -> NlpSolution:
         warm = lam_g0 is not None and lam_x0 is not None
-        args: dict[str, Any] = {"x0": w0, "p": p, "lbx": self.lbx, "ubx": self.ubx, "lbg": self.lbg, "ubg": self.ubg}
+        args: dict[str, Any] = {"x0": w0, "p": p, "lbx": self.lbx if lbx is None else lbx, "ubx": self.ubx,
+                                "lbg": self.lbg, "ubg": self.ubg}
         if warm:
             args.update({"lam_g0": lam_g0, "lam_x0": lam_x0})
         t0 = time.perf_counter()
