@@ -143,6 +143,27 @@ def test_stops_before_an_active_stop_line_then_goes_on(tmp_path: Path) -> None:
     assert all(r.ok for r in res)
 
 
+def test_brakes_for_a_stop_line_seen_from_afar_at_the_stop_deceleration(tmp_path: Path) -> None:
+    """A line the plan must stop at bounds its speeds (a profile braking at the settings'
+    stop_decel), so the 1 s plan, whose cost weighs a² against little tracking error, no longer
+    brakes only when the can-still-stop term at the line binds (5.9 m/s² from 10 m/s before)."""
+    (tmp_path / "street.yaml").write_text(STREET.replace("default_speed_limit: 10", "default_speed_limit: 14"))
+    rl = ", ".join(str(RULES / r) for r in ["speed_limit.stl", "stop_sign.stl"])
+    (tmp_path / "scn.yaml").write_text(
+        "kind: scenario\nname: street\nmap: street.yaml\nego: {start: {lane: a, s: 0}, speed: 10}\n"
+        "route: {start: {lane: a, s: 0}, goal: {lane: a, s: 290}}\ncontroller: {r_near: 60}\n"
+        f"rules: [{rl}]\nrun: {{duration: 30, seed: 0}}\n")
+    w = load_world(tmp_path / "scn.yaml")
+    ctrl = make(w)
+    xs, res = closed_loop(ctrl, w, 80)
+    s, e = w.route.local_coordinates(xs[:, :2])
+    decel = -np.diff(xs[:, 3]) / DT
+    assert np.max(decel) <= ctrl.settings.stop_decel + 0.25, np.max(decel)
+    stopped = np.flatnonzero(xs[:, 3] <= 0.1)
+    assert stopped.size and 37.0 <= np.min(s[stopped]) and np.max(s[stopped]) <= 40.0
+    assert np.max(np.abs(e)) < 1e-3 and all(r.ok for r in res)
+
+
 def test_waits_at_a_red_light_and_goes_on_green(tmp_path: Path) -> None:
     w = street(tmp_path, 100.0, 8.0, ["speed_limit.stl", "red_light.stl"])
     ctrl = make(w)
