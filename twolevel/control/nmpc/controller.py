@@ -31,7 +31,21 @@ that can be written smoothly become constraints, chosen from what the rule sets 
 * a rule reading ``light_red`` or ``d_light``: the same at every step k where the light is red.
 * a rule reading the right-of-way signals (``d_zone``, ``t_reach(o)``, …): the same at the
   high level's give-way line (:func:`~twolevel.control.high_level.right_of_way.give_way_line`)
-  while it holds — the baseline waits before a conflict area, it does not encode the gap rule.
+  while it holds — the baseline waits before a conflict area, it does not encode the gap rule —
+  and, once the line lets it go, from its waiting place until it is out of the area, an
+  acceleration of at least ``CLEAR_ACCEL`` while slower than the rule's v_go: the clearing the
+  line (and the safety layer's verifier) let it go for; the paper's cost alone launches at
+  ≈ 0.86 m/s² and fell behind it inside the area.
+* the route's goal, when the route stops there, is one more such line.
+
+Every such line is also a speed bound (:meth:`NmpcController._line_speeds`: a profile braking
+at ``settings.stop_decel``, or harder when stopping from where the ego is needs it, to a stop
+``settings.stop_margin`` before the line). With the paper's unit weights a 1 m/s² harder braking
+over the horizon costs far more than a few tenths of a radian of steering, so a bound on the
+positions alone was met by steering away from the route: at the 4-way stop the plan turned
+across its lane (0.58 m off, 0.1 rad askew) and the safety layer found no fail-safe to move
+off with. A line the ego's point has passed by at most ``NmpcOptions.stop_slack`` is kept
+where full braking stops it (standing millimetres past its line, the ego still waits).
 
 Anything else (e.g. ``keep_gap`` on d_lead, past operators) is not expressed; each such rule
 gets an ``MIL530`` warning at construction. The NLP is built once (:class:`NmpcProblem`) and
