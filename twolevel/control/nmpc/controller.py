@@ -271,9 +271,11 @@ class NmpcController:
 
     def _lines(self, step: StepData, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The lines the plan stops at: the steps (0-based indices into 1..H) where one applies
-        and the ego's point is still behind it, its route position less ``options.stop_margin``
-        [m] at each, and the stop block's rows (n_x, n_y, b, c) there (see
-        :mod:`twolevel.control.nmpc.nlp`)."""
+        (the nearest stop line, red light, give-way line or the goal) and is kept (the ego's
+        point is behind it, or passed it by at most ``options.stop_slack`` where full braking
+        stops it), the route position [m] the plan must stay behind at each (the line less
+        ``options.stop_margin``, or where the ego stops), and the stop block's rows
+        (n_x, n_y, b, c) there (see :mod:`twolevel.control.nmpc.nlp`)."""
         H = self.settings.H
         route = self.world.route
         # stop lines: the nearest line that applies at step k (inf: none)
@@ -341,14 +343,8 @@ class NmpcController:
         never below what full braking allows. D is the larger of ``settings.stop_decel`` and what
         stopping from (``s0``, ``v0``) needs, at most the bicycle's |a_min|. A plan never faster
         than the profile is never ahead of it, so the bound needs no guess of the plan's
-        positions.
-
-        A line is a speed limit falling to 0 at it: a bound on the plan's positions alone (the
-        stop block of :mod:`twolevel.control.nmpc.nlp`) the paper's cost meets by steering
-        away from the route (braking 1 m/s² harder over the horizon costs more than turning a
-        few tenths of a radian), and the plan slid sideways along the line or turned across it
-        (at the 4-way stop 0.6 m off its lane and 0.1 rad askew, after which the safety layer
-        found no fail-safe to move off with). Steering does not lower a speed."""
+        positions. A line is a speed limit falling to 0 at it, which steering cannot meet, as it
+        met the bound on the positions alone (the module docstring)."""
         H, dt = self.settings.H, self.settings.dt
         a_min, a_max = abs(self.params.a_min), self.params.a_max
         room = s_stop - s0
