@@ -175,3 +175,21 @@ def test_collision_free_robustness_matches_the_diamond() -> None:
     y = np.concatenate([[0.0], sol.x[ys.idx]])
     d1 = np.abs(x[:, None] - others[:, :, 0].T) + np.abs(y[:, None] - others[:, :, 1].T)
     assert sol.x[enc.rho] == pytest.approx(float(d1.min() - 2.0), abs=1e-6)
+
+
+@pytest.mark.parametrize("margin", [0.0, 0.02, 0.05])
+def test_a_rule_with_a_margin_holds_that_far_inside_its_bound(margin: float) -> None:
+    """``margins`` {name: m}: that rule is required with robustness ≥ eps + m, the others with eps."""
+    b = ModelBuilder()
+    pb, vb, ab, sig = double_integrator(b, np.zeros(PAST + 1), np.zeros(PAST + 1))
+    b.add_linear_cost(np.array([pb.start + 4]), -1.0)  # push p_5 as far as the rules let it
+    b.add_linear_cost(np.array([vb.start + 7]), -1.0)  # and v_8
+    reqs = [Requirement("near", ast.Compare("<=", P, _num(0.1)), (NOW + 5,)),
+            Requirement("slow", ast.Compare("<=", V, _num(0.5)), (NOW + 8,))]
+    eps = 1e-4
+    enc = encode(b, reqs, sig, DT, eps=eps, margins={"near": margin})
+    assert not enc.infeasible
+    sol = solve_highs(b.build())
+    assert sol.status is Status.OPTIMAL
+    assert sol.x[pb.start + 4] == pytest.approx(0.1 - eps - margin, abs=1e-6)
+    assert sol.x[vb.start + 7] == pytest.approx(0.5 - eps, abs=1e-6)

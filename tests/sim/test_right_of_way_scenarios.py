@@ -59,6 +59,15 @@ def _moves_off_briskly(c: dict[str, np.ndarray], v_go: float = 4.0, a_go: float 
     assert not (inside & (c["v"] < v_go) & (c["a"] < a_go)).any()
 
 
+def _plan_holds_inside(c: dict[str, np.ndarray]) -> None:
+    """Inside the area the low level executes the plan as it is: the plan keeps a margin inside
+    clear_junction's bound (MPCSettings.margins), so the detailed car, which gains less speed than
+    the plan's model in a tight turn, still holds it on the low level's prediction (the plan used
+    to sit on a = a_go and the low level sampled corrections on most steps of moving off)."""
+    inside = (c["d_zone"] <= 0) & (c["d_zone_out"] > 0)
+    assert inside.any() and not (inside & (c["candidates"] > 0)).any()
+
+
 def _check_gaps(c: dict[str, np.ndarray], margin: float = 1.5) -> tuple[np.ndarray, np.ndarray]:
     """No priority car within the margin while the ego is inside; returns (inside, waiting)."""
     inside = (c["d_zone"] <= 0) & (c["d_zone_out"] > 0)
@@ -112,6 +121,7 @@ def test_blocked_exit_is_not_entered(tmp_path: Path) -> None:
 def test_right_turn_merges_behind_the_stream_from_the_left(tmp_path: Path) -> None:
     c = _run(tmp_path, "right_turn_stream")
     _moves_off_briskly(c)
+    _plan_holds_inside(c)
     inside, waiting = _check_gaps(c)
     assert waiting.sum() >= 10
     first_in = int(np.flatnonzero(inside)[0])
@@ -139,6 +149,7 @@ def test_the_nmpc_baseline_waits_in_its_lane(tmp_path: Path) -> None:
 def test_merge_behind_a_cyclist_after_a_pedestrian(tmp_path: Path) -> None:
     c = _run(tmp_path, "merge_cyclist")
     _moves_off_briskly(c)
+    _plan_holds_inside(c)
     # behind the cyclist a refused correction gives way to the fail-safe (braking), not to a plan
     # that would close in on the cyclist: the collision rule (D_safe) held throughout
     assert (c["rob_no_collision"] >= 0).all()

@@ -73,6 +73,7 @@ def encode(
     stable: bool = False,
     recover: bool = False,
     recover_after: Mapping[str, int] | None = None,
+    margins: Mapping[str, float] | None = None,
 ) -> Encoding:
     """Encode ``requirements`` into ``builder`` (rows in one block named ``"stl"``).
 
@@ -86,7 +87,8 @@ def encode(
     instead from the first later step at which it can hold given the variables' bounds (the
     first step whose value the plan can still change); each such shift is listed in
     ``Encoding.recovered`` as (name, step, new step). ``recover_after`` {name: k}: search from step
-    + k + 1 on (after a recovery that the solver found infeasible)."""
+    + k + 1 on (after a recovery that the solver found infeasible). ``margins`` {name: m}
+    (satisfaction mode): that requirement is required with robustness ≥ ``eps`` + m."""
     pids = participants_in(signals)
     requirements = [replace(r, formula=expand_quantifiers(r.formula, pids)) for r in requirements]
     rules = {k: expand_quantifiers(v, pids) for k, v in (rules or {}).items()}
@@ -124,7 +126,7 @@ def encode(
         for name, t, tree in trees:
             emitter.label = f"{name}@{t}"
             before = emitter.infeasible
-            emitter.require(tree, margin)
+            emitter.require(tree, margin if not margins or name not in margins else margin + margins[name])
             if emitter.infeasible and not before:
                 diagnostics.append(MIL503(f"rule '{name}' cannot hold at step {t} given the known signals", NOWHERE))
         emitter.flush("stl")

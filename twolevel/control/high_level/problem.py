@@ -507,7 +507,8 @@ def assemble(
     others = others_of(step, P)
     cf = collision_free_builtin("x", "y", others, ids=np.asarray(hc.index, np.int64), pad=settings.pad, keep=keep)
     enc = encode(b, rules.requirements, sigs, settings.dt, eps=settings.eps, length=T,
-                 builtins={"collision_free": cf}, stable=stable, recover=recover, recover_after=rules.recover_after)
+                 builtins={"collision_free": cf}, stable=stable, recover=recover, recover_after=rules.recover_after,
+                 margins=dict(settings.margins))
     model = b.build(cache)
     _cost(model, step, lay, settings.weights)
     diags = list(enc.diagnostics)

@@ -133,7 +133,9 @@ def refresh(tpl: StepTemplate, step: StepData, rules: StepRules, settings: MPCSe
     writes: list[tuple[Emission, np.ndarray, np.ndarray, np.ndarray | None]] = []
     it = iter(tpl.emissions)
     pids = participants_in(sigs)  # quantifiers over the participants in range, as the encoder expands them
+    margins = dict(settings.margins)
     for req, kinds in zip(requirements, tpl.kinds):
+        eps = settings.eps + margins.get(req.name, 0.0)
         try:
             p = _parts(ev.rob(expand_quantifiers(req.formula, pids), P, 1.0))
         except EncodeError:  # e.g. undefined now (MIL505): the whole encoding reports it
