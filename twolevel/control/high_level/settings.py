@@ -68,13 +68,14 @@ class MPCSettings:
     """Relative optimality gap at which the mode search certifies a plan."""
     eps: float = 1e-4
     """Satisfaction margin: a rule is required with robustness ≥ eps."""
-    margins: tuple[tuple[str, float], ...] = (("clear_junction", 0.3),)
+    margins: tuple[tuple[str, float], ...] = (("clear_junction", 0.2),)
     """(rule name, margin) pairs: that rule is required with robustness ≥ eps + margin, a margin
     inside its bound for what the detailed car realises less well than the plan's model. The
     right-of-way rule pack's clear_junction (rules/right_of_way.stl: a ≥ a_go until v ≥ v_go):
     moving off in a tight turn the steered front tyres drag and the detailed car gains about 13 %
     less speed than the plan, so a plan on the bound breaks it on the low level's prediction
-    (which then samples a correction); 0.15 [m/s², m/s] covers that shortfall at a_go = 1 m/s²."""
+    (which then samples a correction); measured on right_turn_stream and merge_cyclist, 0.15 still let
+    the low level sample (the shortfall adds up over the look-ahead), 0.2 [m/s², m/s] does not."""
     monitor: bool = True
     """Evaluate ``rule_robustness`` of the plan by the offline monitor."""
     relinearise: bool = True
