@@ -158,6 +158,10 @@ def test_merge_behind_a_cyclist_after_a_pedestrian(tmp_path: Path) -> None:
     # it gave way to the cyclist and to the car on the priority road: in after both had passed
     assert c["t_reach[cyclist]"][first_in] == np.inf and c["t_reach[car]"][first_in] == np.inf
     assert waiting.sum() >= 10 and np.flatnonzero(waiting)[-1] < first_in
+    # behind the cyclist, which it does not pass (a cyclist is passed only over the oncoming lane,
+    # twolevel.world.clearance), the ego keeps its box in its lane: never over the centre line
+    out = c["d_zone_out"] <= 0
+    assert np.isfinite(c["over_centre"][out]).sum() >= 50 and (c["over_centre"][out] < 0).all()
 
 
 @pytest.mark.slow
