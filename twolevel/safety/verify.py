@@ -283,12 +283,11 @@ def _back(ctx: Context, traffic: TrafficState, s_ego: float, e_ego: float, pose:
         s_i, e_i = w.route.project_near(traffic.xy[idx], np.full(len(idx), s_ego), PASS_REACH + 10.0)
         half = 0.5 * float(w.route.width_at(np.array([s_ego]))[0])
         length = w.parts.length[idx]
-        beside = ((np.abs(e_i) < half + 0.5 * w.parts.width[idx]) & (s_i + length / 2 > s_ego - w.ego.length / 2)
-                  & (s_i - s_ego < PASS_REACH))
+        in_lane = np.abs(e_i) < half + 0.5 * w.parts.width[idx]
+        beside = in_lane & (s_i + length / 2 > s_ego - w.ego.length / 2) & (s_i - s_ego < PASS_REACH)
         along = traffic.v[idx] * np.cos(traffic.psi[idx] - w.route.heading_at(s_i))
         # passed and not yet returned in front of: behind it in the route's lane, slower than it
-        behind = ((np.abs(e_i) < half + 0.5 * w.parts.width[idx]) & (s_i < s_ego) & (s_ego - s_i < PASS_REACH)
-                  & (along < v_ego))
+        behind = in_lane & (s_i < s_ego) & (s_ego - s_i < PASS_REACH) & (along < v_ego)
         passed[idx[behind]] = True
         if beside.any():
             s_past = float(np.max(s_i[beside] + length[beside] / 2)) + w.ego.length / 2 + w.settings.D_safe
