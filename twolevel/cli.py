@@ -233,7 +233,8 @@ def monitor(
     Exit 0 when every rule holds at every time of the trace, 1 when some rule is violated
     somewhere (first_violation_t), 2 when the rule file or the trace cannot be used or some rule
     could not be judged (verdict "not judged": it reads a column the trace lacks, or it
-    quantifies over participants the trace does not record, SIM609).
+    quantifies over participants the trace does not record, SIM609, unless the run.json beside
+    the trace says the run had none).
     """
     from twolevel import pipeline
     from twolevel.diagnostics import render

@@ -498,11 +498,14 @@ def monitor_trace(
     *,
     series: bool = False,
     builtins: Mapping[str, Builtin] | None = None,
+    participants: Sequence[str] | None = None,
 ) -> tuple[MonitorReport, list[Diagnostic]]:
     """Evaluate every rule over the trace (offline, RTAMT semantics). A rule that cannot be judged
     on it (it reads a column the trace lacks, its robustness is undefined, it quantifies over
     participants the trace does not record, or it reads such a rule) gets no verdict: a
-    diagnostic, and an entry in the report's ``unjudged``."""
+    diagnostic, and an entry in the report's ``unjudged``. ``participants``: the ids the run
+    had, when known (its ``run.json``); an empty one says the run had none, so a quantifier is
+    judged over the empty set instead of being refused as unrecorded (SIM609)."""
     if isinstance(rules, ast.RuleFile):
         consts = {**consts_of(rules), **consts}
         rules = rules.rules
@@ -519,6 +522,7 @@ def monitor_trace(
     hints: dict[str, str] = {}
     skip = set(consts) | {r.name for r in rules}  # once: per rule it made R rules cost O(R²)
     pids = participants_in(trace.columns)
+    none_took_part = participants is not None and len(participants) == 0  # the empty set is then the truth
     evaluator: TraceEvaluator | MonitorError
     try:
         evaluator = TraceEvaluator(trace.columns, trace.dt, consts=consts, builtins=builtins)
@@ -527,11 +531,12 @@ def monitor_trace(
     for rule in rules:
         missing = []
         why: str | None = None
-        if not pids and quantifies(rule.formula):
+        if not pids and not none_took_part and quantifies(rule.formula):
             why = SIM609.id
+            had = f" (its run had {len(participants)}: {_listed(participants)})" if participants else ""
             diags.append(SIM609(
                 f"rule '{rule.name}' cannot be judged: it quantifies over participants, but the trace "
-                f"{os.path.basename(trace.path)} records none (no column {participant_key(PRESENT, 'ID')}), "
+                f"{os.path.basename(trace.path)} records none{had} (no column {participant_key(PRESENT, 'ID')}), "
                 "so its quantifiers would hold vacuously",
                 rule.name_span or rule.span or whole,
                 hint="re-run `twolevel simulate` with this rule file among the scenario's rules: a run records "

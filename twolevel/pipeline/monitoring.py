@@ -6,8 +6,10 @@ Heavy modules are imported inside :func:`monitor`.
 
 from __future__ import annotations
 
+import json
+import os
 from dataclasses import dataclass, field
-from typing import Mapping
+from typing import Mapping, Sequence
 
 from twolevel.diagnostics import Diagnostic
 from twolevel.files import read_text_quietly
@@ -56,6 +58,19 @@ def monitor(
     diags = rule_diags + diags
     if ruleset is None:
         return MonitorResult(None, tuple(diags), sources)
-    report, run_diags = monitor_trace(ruleset.rules, dict(ruleset.consts), trace, series=series)
+    report, run_diags = monitor_trace(ruleset.rules, dict(ruleset.consts), trace, series=series,
+                                      participants=run_participants(trace_path))
     diags += run_diags
     return MonitorResult(report, tuple(diags), sources)
+
+
+def run_participants(trace_path: str) -> Sequence[str] | None:
+    """The ids of every participant of the run that wrote ``trace_path``, as its ``run.json``
+    beside it records them; ``None`` when unknown (no run directory, an unreadable or older
+    ``run.json``, or traffic from another engine that brings participants mid-run)."""
+    text = read_text_quietly(os.path.join(os.path.dirname(os.path.abspath(trace_path)), "run.json"), 1 << 26)
+    try:
+        ids = json.loads(text).get("participants") if text else None
+    except (ValueError, AttributeError):  # not JSON, or JSON but not an object: no evidence either way
+        return None
+    return tuple(ids) if isinstance(ids, list) and all(isinstance(i, str) for i in ids) else None

@@ -14,8 +14,8 @@ from twolevel.report.metrics import COLLISION_LINE_M, DECISION_LEVEL, Metrics, R
 
 #: run.json keys shown in the provenance table, in order (the rest are listed after them).
 PROVENANCE_KEYS = ("scenario", "status", "error", "rows", "seed", "settings", "rules", "versions", "wall_time_s")
-#: run.json keys never shown (bulky geometry, or shown elsewhere).
-HIDDEN_KEYS = frozenset({"map_lines", "summary", "verdict", "road_edges", "ride"})
+#: run.json keys never shown (bulky geometry or id lists, or shown elsewhere).
+HIDDEN_KEYS = frozenset({"map_lines", "summary", "verdict", "road_edges", "ride", "participants"})
 
 
 def fmt(value: Any, digits: int = 3, unit: str = "") -> str:

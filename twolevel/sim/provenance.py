@@ -74,4 +74,8 @@ def run_metadata(world: World, scn: Scenario, *, monitor: bool, controller: str,
                     "cpus": cpus()},
         "timing_columns": list(timing_columns),
         "map_lines": map_lines(world),
+        # who took part: with the built-in traffic the scenario's participants are all there are
+        # (``monitor`` tells a run without participants from one that did not record them); another
+        # engine brings its own mid-run, so the list would not be complete
+        "participants": list(world.parts.ids) if t is None else None,
     }
