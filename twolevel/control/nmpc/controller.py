@@ -90,6 +90,8 @@ from twolevel.world.world import World
 __all__ = ["NmpcOptions", "NmpcController", "LastSolution", "MODELS"]
 
 _FAR = 1.0e3  # [m] offset of the dummy obstacles
+#: the lines a plan stops at (:meth:`NmpcController._lines`): the steps, route positions [m], rows
+Lines = tuple[np.ndarray, np.ndarray, np.ndarray]
 
 
 @dataclass(frozen=True)
@@ -230,8 +232,9 @@ class NmpcController:
             return ego.detailed.copy()
         return fw.initial_state(*(float(c) for c in ego.pose[:4]), p=self.vehicle)
 
-    def parameters(self, step: StepData, x0: np.ndarray) -> np.ndarray:
-        """The NLP's parameter vector for this step (see :mod:`twolevel.control.nmpc.nlp`)."""
+    def parameters(self, step: StepData, x0: np.ndarray, lines: Lines | None = None) -> np.ndarray:
+        """The NLP's parameter vector for this step (see :mod:`twolevel.control.nmpc.nlp`);
+        ``lines``: the step's :meth:`_lines` when already known."""
         H, dt = self.settings.H, self.settings.dt
         hc = step.hc
         route = self.world.route
@@ -242,7 +245,7 @@ class NmpcController:
         ws = self.world.settings  # what the ego can stop from within its sensing range
         vb = np.minimum(vb, sensing_bound(float(x0[3]), np.arange(H + 1), dt, ws.v_sense, ws.response.brake_min))
         stop = np.tile([0.0, 0.0, 1.0, 0.0], (H, 1))
-        kept, s_stop, rows = self._lines(step, x0)
+        kept, s_stop, rows = self._lines(step, x0) if lines is None else lines
         if kept.size:
             stop[kept] = rows
             # aimed where the reference stops (settings.stop_margin before the line), the
@@ -269,7 +272,7 @@ class NmpcController:
             steer = np.column_stack([ref, np.concatenate([before, ref[:-1]]), step.steer_weight[:H]])
         return self.problem.layout.pack(x0, step.u_prev, step.omega, vb, stop, centres, shapes, steer)
 
-    def _lines(self, step: StepData, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _lines(self, step: StepData, x0: np.ndarray) -> Lines:
         """The lines the plan stops at: the steps (0-based indices into 1..H) where one applies
         (the nearest stop line, red light, give-way line or the goal) and is kept (the ego's
         point is behind it, or passed it by at most ``options.stop_slack`` where full braking
@@ -307,7 +310,7 @@ class NmpcController:
         rows = np.column_stack([n, b, c])[kept]
         return act[kept], (sl - self.options.stop_margin + over)[kept], rows
 
-    def _launch(self, step: StepData, x0: np.ndarray) -> np.ndarray | None:
+    def _launch(self, step: StepData, x0: np.ndarray, lines: Lines) -> np.ndarray | None:
         """(H,) [m/s²] The least acceleration at each step when the ego moves off into a conflict
         area (None: no bound): :data:`~twolevel.control.high_level.right_of_way.CLEAR_ACCEL`
         while the speed it gives stays below the rule's least speed inside (``GapRule.speed``,
@@ -326,7 +329,7 @@ class NmpcController:
         half = 0.5 * zc.length
         if not zc.s_in - half - 2.0 * RUN_UP <= zc.s0 < zc.s_out + half:
             return None  # not at its waiting place, or out of the area
-        if np.any(self._lines(step, x0)[1] < zc.s_out + half):
+        if np.any(lines[1] < zc.s_out + half):
             return None  # a line stops it before it is through
         H, dt = self.settings.H, self.settings.dt
         slow = float(x0[3]) + CLEAR_ACCEL * dt * np.arange(H) < zc.gap.speed
@@ -393,9 +396,10 @@ class NmpcController:
         step = self._prepare(x0, t, world_state, history)
         t1 = time.perf_counter()
         tm["prepare"] = (t1 - t0) * 1e3
-        p = self.parameters(step, x0)
+        lines = self._lines(step, x0)
+        p = self.parameters(step, x0, lines)
         w0, lg, lx, how = self._initial_guess(t, step, x0)
-        a_low = self._launch(step, x0)
+        a_low = self._launch(step, x0, lines)
         tm["parameters"] = (time.perf_counter() - t1) * 1e3
         sol = self.problem.solve(w0, p, lg, lx, retry=self.options.retry, a_low=a_low)
         self.last = sol
