@@ -193,3 +193,33 @@ def test_a_rule_with_a_margin_holds_that_far_inside_its_bound(margin: float) -> 
     assert sol.status is Status.OPTIMAL
     assert sol.x[pb.start + 4] == pytest.approx(0.1 - eps - margin, abs=1e-6)
     assert sol.x[vb.start + 7] == pytest.approx(0.5 - eps, abs=1e-6)
+
+
+@pytest.mark.parametrize("margin", [0.02, 0.05, 0.12, 0.15])
+def test_a_margin_is_dropped_only_at_a_step_whose_known_value_leaves_no_room_for_it(margin: float) -> None:
+    """``near`` (p ≤ 0.1) at the step now, where p = 0 is known, has robustness 0.1: a margin
+    that fits is required, one beyond it falls back to the plain eps at that step (listed in
+    ``unmargined``) instead of making the encoding infeasible, and later steps keep it."""
+    b = ModelBuilder()
+    pb, vb, ab, sig = double_integrator(b, np.zeros(PAST + 1), np.zeros(PAST + 1))
+    b.add_linear_cost(np.array([pb.start + 4]), -1.0)
+    near = ast.Compare("<=", P, _num(0.1))
+    eps = 1e-4
+    enc = encode(b, [Requirement("near", near, (NOW, NOW + 5))], sig, DT, eps=eps, margins={"near": margin})
+    assert not enc.infeasible
+    assert enc.unmargined == ([] if eps + margin <= 0.1 else [("near", NOW)])
+    sol = solve_highs(b.build())
+    assert sol.status is Status.OPTIMAL
+    assert sol.x[pb.start + 4] == pytest.approx(0.1 - eps - margin, abs=1e-6)
+
+
+def test_a_margin_in_robustness_mode_shifts_the_maximised_robustness() -> None:
+    """In robustness mode ρ ≤ robustness − m for a rule with margin m: the maximised ρ is the
+    plan's robustness of that rule less its margin."""
+    b = ModelBuilder()
+    pb, vb, ab, sig = double_integrator(b, np.zeros(PAST + 1), np.zeros(PAST + 1))
+    reqs = [Requirement("near", ast.Compare("<=", P, _num(0.1)), (NOW + 5,))]
+    enc = encode(b, reqs, sig, DT, mode="robustness", margins={"near": 0.05}, rho_bounds=(-10.0, 10.0))
+    sol = solve_highs(b.build())
+    assert sol.status is Status.OPTIMAL
+    assert sol.x[enc.rho] == pytest.approx(0.1 - sol.x[pb.start + 4] - 0.05, abs=1e-6)

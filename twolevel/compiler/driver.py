@@ -53,7 +53,7 @@ from twolevel.milp.builder import ModelBuilder
 from twolevel.stl import ast
 from twolevel.stl.analysis import expand_quantifiers, participants_in
 
-__all__ = ["encode"]
+__all__ = ["encode", "margin_at"]
 
 
 def encode(
@@ -87,8 +87,13 @@ def encode(
     instead from the first later step at which it can hold given the variables' bounds (the
     first step whose value the plan can still change); each such shift is listed in
     ``Encoding.recovered`` as (name, step, new step). ``recover_after`` {name: k}: search from step
-    + k + 1 on (after a recovery that the solver found infeasible). ``margins`` {name: m}
-    (satisfaction mode): that requirement is required with robustness ≥ ``eps`` + m."""
+    + k + 1 on (after a recovery that the solver found infeasible). ``margins`` {name: m}: that
+    requirement is required with robustness ≥ ``eps`` + m (≥ ρ + m in robustness mode) — in
+    satisfaction mode at each step where it can be, given the variables' bounds: at a step
+    whose value what is known already fixes (the speed and acceleration now, say) below
+    ``eps`` + m but not below ``eps``, it is required with plain ``eps`` (listed in
+    ``Encoding.unmargined`` as (name, step)), so a margin never makes a step infeasible that
+    its bound alone does not."""
     pids = participants_in(signals)
     requirements = [replace(r, formula=expand_quantifiers(r.formula, pids)) for r in requirements]
     rules = {k: expand_quantifiers(v, pids) for k, v in (rules or {}).items()}
@@ -126,7 +131,12 @@ def encode(
         for name, t, tree in trees:
             emitter.label = f"{name}@{t}"
             before = emitter.infeasible
-            emitter.require(tree, margin if not margins or name not in margins else margin + margins[name])
+            m = float(margins.get(name, 0.0)) if margins else 0.0
+            if m and mode == "satisfaction" and not margin_at(ev, tree, m, float(eps)):
+                out.unmargined.append((name, t))
+                m = 0.0
+            emitter.require(tree, margin if m == 0.0 else
+                            Lin(margin.idx, margin.val, margin.c + m) if isinstance(margin, Lin) else margin + m)
             if emitter.infeasible and not before:
                 diagnostics.append(MIL503(f"rule '{name}' cannot hold at step {t} given the known signals", NOWHERE))
         emitter.flush("stl")
@@ -144,6 +154,13 @@ def encode(
         out.trees = trees
         out.emissions = emitter.emissions
     return out
+
+
+def margin_at(ev: Evaluator, tree: Tree, margin: float, eps: float) -> float:
+    """The margin [the rule's units] a requirement's folded ``tree`` is required with above
+    ``eps`` in satisfaction mode: ``margin``, or 0 where the tree's upper bound (what is known,
+    the variables' bounds) cannot reach ``eps`` + ``margin`` (see :func:`encode`)."""
+    return margin if margin == 0.0 or ev.bounds(tree)[1] >= eps + margin else 0.0
 
 
 def _recover(ev: Evaluator, trees: list[tuple[str, int, Tree]], reqs: list[Requirement], eps: float,

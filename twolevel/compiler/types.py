@@ -57,6 +57,7 @@ class Encoding:
     trees: list[tuple[str, int, Tree]] = field(default_factory=list)
     emissions: list[Emission] = field(default_factory=list)
     recovered: list[tuple[str, int, int]] = field(default_factory=list)
+    unmargined: list[tuple[str, int]] = field(default_factory=list)  # (name, step): margin left out, see encode
 
 
 @dataclass(slots=True)

@@ -49,5 +49,7 @@ YML432 = Code("YML432", "bend-too-fast", W,
 YML433 = Code("YML433", "impossible-motion", E, "A scripted participant asks for more acceleration or braking than any tyre gives.")
 YML434 = Code("YML434", "beyond-assumptions", W,
               "A participant is scripted beyond what the safety layer assumes of its kind; the simulation limits it.")
+YML435 = Code("YML435", "unknown-rule-margin", E,
+              "controller.margins names a rule that none of the scenario's rule files defines.")
 
 __all__ = [name for name in dir() if name.startswith("YML")]

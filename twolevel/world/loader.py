@@ -23,7 +23,7 @@ from pydantic import BaseModel, ValidationError
 from twolevel.diagnostics import Diagnostic, Span
 from twolevel.world.codes import (
     YML410, YML411, YML412, YML413, YML414, YML415, YML416, YML417, YML418, YML419, YML420, YML421,
-    YML423, YML428, YML430,
+    YML423, YML428, YML430, YML435,
 )
 from twolevel.world.document import Document, Path_, read_document
 from twolevel.world.junction import plan_junctions
@@ -692,8 +692,8 @@ def _check_vehicle(spec: ScenarioFile, doc: Document) -> list[Diagnostic]:
     return out
 
 
-def _rule_names(path: str) -> list[tuple[str, Span]]:
-    """The rules ``path`` defines, with where each name is; none if it cannot be read or parsed
+def _rule_names(path: str) -> list[tuple[str, Span]] | None:
+    """The rules ``path`` defines, with where each name is; None if it cannot be read or parsed
     (its own diagnostics say why)."""
     from twolevel.stl.parser import parse  # lazy: no numpy, but only scenarios with rules need it
     from twolevel.stl.source import read_source
@@ -702,19 +702,23 @@ def _rule_names(path: str) -> list[tuple[str, Span]]:
     text, _ = read_source(shown)
     rulefile = parse(text, shown)[0] if text is not None else None
     if rulefile is None:
-        return []
+        return None
     return [(r.name, r.name_span or Span.whole_file(shown)) for r in rulefile.rules]
 
 
-def _check_rule_names(rules: Iterable[RuleFile]) -> list[Diagnostic]:
+def _check_rule_names(rules: Iterable[RuleFile]) -> tuple[list[Diagnostic], dict[str, Span] | None]:
     """YML428 at a scenario's rule entry that repeats a file, or whose file defines a rule another
     entry's file already defines: a scenario's rules share one name space (each is a trace
-    column ``rob_<name>``, a monitor verdict and a constraint group of the MPC)."""
+    column ``rob_<name>``, a monitor verdict and a constraint group of the MPC). Also returns
+    the rules defined {name: where}, None when a rule file is missing or cannot be parsed (its
+    own diagnostics say why)."""
     out: list[Diagnostic] = []
     listed: dict[str, RuleFile] = {}
     defined: dict[str, Span] = {}  # rule name → where the first file defines it
+    complete = True
     for rf in rules:
         if not _is_file(rf.path):
+            complete = False
             continue  # reported as a missing file
         if rf.path in listed:
             first = listed[rf.path].span
@@ -722,7 +726,9 @@ def _check_rule_names(rules: Iterable[RuleFile]) -> list[Diagnostic]:
                               hint="list each rule file once; to check a rule at other constants, copy it under another name"))
             continue
         listed[rf.path] = rf
-        names = _rule_names(rf.path)
+        parsed = _rule_names(rf.path)
+        complete = complete and parsed is not None
+        names = parsed or []
         for name, span in names:  # a name repeated within one file is the rule checker's (STL2xx)
             first_def = defined.get(name)
             if first_def is not None:
@@ -732,6 +738,26 @@ def _check_rule_names(rules: Iterable[RuleFile]) -> list[Diagnostic]:
                                   "or leave out the file that repeats it"))
         for name, span in names:
             defined.setdefault(name, span)
+    return out, (defined if complete else None)
+
+
+def _check_margins(spec: ScenarioFile, doc: Document, defined: Mapping[str, Span] | None) -> list[Diagnostic]:
+    """YML435 at each key of ``controller.margins`` that names no rule of the scenario's rule
+    files (``defined``; not judged when one of them is missing or unparsable: its own
+    diagnostics come first)."""
+    margins = spec.controller.margins
+    if not margins or defined is None:
+        return []
+    out: list[Diagnostic] = []
+    known = sorted(defined)
+    for name in margins:
+        if name in defined:
+            continue
+        close = _suggest(name, known)
+        rules = ", ".join(known) if known else "none (the scenario lists no rule file)"
+        out.append(YML435(f"margin for rule '{name}', which no rule file of the scenario defines"
+                          + (f" — {close}" if close else ""), doc.locate(("controller", "margins", name)),
+                          hint=f"rules defined: {rules}"))
     return out
 
 
@@ -811,7 +837,8 @@ def load_scenario(path: str | os.PathLike[str], parameters: Mapping[str, float] 
         if not _is_file(target):
             diags.append(YML418(f"rule file not found: {ref.file}", at, hint="paths are relative to the scenario file"))
         rules.append(RuleFile(str(target), tuple(sorted(ref.constants.items())), at))
-    diags += _check_rule_names(rules)
+    ndiags, defined = _check_rule_names(rules)
+    diags += ndiags + _check_margins(spec, doc, defined)
     spec, tdiags = _traffic_files(spec, doc)
     diags += tdiags
     if m is None:

@@ -743,6 +743,9 @@ class ControllerSettings(_Model):
     v2i: Annotated[bool, Strict()] = Field(default=False, description="the planner knows the lights' programs (true) or only their state now")
     weights: WeightsSpec = Field(default_factory=lambda: WeightsSpec(),
                                  description="the MPC's cost weights {u, du, track: [x, y, psi, v]} (the paper's: all 1)")
+    margins: dict[str, Annotated[Number, Field(ge=0, le=CONST_MAX)]] | None = Field(
+        default=None, description="rule name → how far inside its bound the plan keeps that rule, in the rule's own "
+                                  "units (default {clear_junction: 0.2}; a map given replaces it)")
 
 
 class RunSettings(_Model):

@@ -87,6 +87,9 @@ class Settings:
     """The planner knows the lights' programs (else only each light's state now)."""
     weights: tuple[float, float, tuple[float, float, float, float]] = (1.0, 1.0, (1.0, 1.0, 1.0, 1.0))
     """The MPC's cost weights (u, du, track per x, y, ψ, v)."""
+    margins: tuple[tuple[str, float], ...] | None = None
+    """(rule name, margin) pairs: how far inside its bound the MPC keeps that rule, in the rule's
+    own units (None: :attr:`~twolevel.control.high_level.settings.MPCSettings.margins`' default)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -250,7 +253,8 @@ def build_world(scn: Scenario) -> World:
     settings = Settings(c.H, c.dt, near_radius(scn), c.r, c.D_safe, c.samples, c.time_limit, c.solver, c.stop_speed,
                         c.yellow_decel, spec.run.duration, spec.run.seed, c.horizon_s, c.coarse_dt,
                         None if c.coarse_steps is None else tuple(c.coarse_steps), c.rss, sense.range, sense.response,
-                        sense.v_bound, comfort, c.v2i, (c.weights.u, c.weights.du, tuple(c.weights.track)))
+                        sense.v_bound, comfort, c.v2i, (c.weights.u, c.weights.du, tuple(c.weights.track)),
+                        None if c.margins is None else tuple(sorted(c.margins.items())))
     ego = EgoStart(ex, ey, epsi, spec.ego.speed, spec.ego.box.length, spec.ego.box.width,
                    MappingProxyType(dict(spec.ego.vehicle)))
     rs = route.from_lane(stops.lane, stops.s)

@@ -145,10 +145,13 @@ class MPCSettings:
 
     @classmethod
     def of_world(cls, ws: Any, **fields: Any) -> "MPCSettings":
-        """Settings with a world's horizon (H, dt and the look-ahead), RSS switch and cost weights, from its
-        :class:`~twolevel.world.world.Settings` ``ws``; ``fields`` set the others."""
+        """Settings with a world's horizon (H, dt and the look-ahead), RSS switch, cost weights and rule
+        margins (where the scenario gives them), from its :class:`~twolevel.world.world.Settings`
+        ``ws``; ``fields`` set the others."""
         u, du, track = ws.weights
         fields.setdefault("weights", Weights(float(u), float(du), tuple(float(w) for w in track)))  # type: ignore[arg-type]
+        if ws.margins is not None:
+            fields.setdefault("margins", tuple((str(n), float(m)) for n, m in ws.margins))
         return cls(H=ws.H, dt=ws.dt, horizon_s=ws.horizon_s, coarse_dt=ws.coarse_dt, coarse_steps=ws.coarse_steps,
                    rss=ws.rss, **fields)
 

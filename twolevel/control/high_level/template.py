@@ -30,6 +30,7 @@ import numpy as np
 from twolevel.compiler.affine_block import AffineBlock
 from twolevel.compiler.collision import CollisionBlock, collision_free_builtin
 from twolevel.compiler.codes import EncodeError
+from twolevel.compiler.driver import margin_at
 from twolevel.compiler.evaluator import Evaluator
 from twolevel.compiler.signals import AffineSignal, TraceSignals
 from twolevel.compiler.tree import Block, Box, IntervalBounds, Op
@@ -135,11 +136,12 @@ def refresh(tpl: StepTemplate, step: StepData, rules: StepRules, settings: MPCSe
     pids = participants_in(sigs)  # quantifiers over the participants in range, as the encoder expands them
     margins = dict(settings.margins)
     for req, kinds in zip(requirements, tpl.kinds):
-        eps = settings.eps + margins.get(req.name, 0.0)
         try:
-            p = _parts(ev.rob(expand_quantifiers(req.formula, pids), P, 1.0))
+            tree = ev.rob(expand_quantifiers(req.formula, pids), P, 1.0)
         except EncodeError:  # e.g. undefined now (MIL505): the whole encoding reports it
             return None
+        eps = settings.eps + margin_at(ev, tree, margins.get(req.name, 0.0), settings.eps)  # as the encoder
+        p = _parts(tree)
         if p is None or p[1] < eps or tuple(_kind(b) for b in p[0]) != kinds:
             return None
         for b in p[0]:
