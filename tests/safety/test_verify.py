@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
 from helpers.safety_worlds import ego_on, place, world
 from twolevel.models import fourwheel as fw
 from twolevel.models.rollout import rollout
-from twolevel.safety.verify import context, time_to_react, verify_initial_state, verify_step
+from twolevel.safety.verify import _back, context, time_to_react, verify_initial_state, verify_step
 
 KEEP = np.array([0.0, 0.0])  # [δ, γ]: roll on
 FULL = np.array([0.0, -1.0])
@@ -218,3 +220,32 @@ def test_in_a_bend_the_box_is_judged_against_the_lane_under_each_corner(e, rel, 
     v = verify_initial_state(ctx, _on_route(w, 56.0, e, rel, 3.0), lead, s_hint=56.0)
     names = [r.failsafe for r in v.refutations] + ([v.failsafe.name] if v.failsafe else [])
     assert names and all(n.endswith("back in lane") is back for n in names)
+
+
+# ------------------------------------------------------------------- out of the lane, passing
+
+
+@pytest.mark.parametrize("s_car, v_car, counted", [
+    (130.0, 20.0, False),  # ahead and moving away faster than the ego: not being passed
+    (130.0, 12.0, False),  # ahead at the ego's own speed: the ego does not close on it
+    (130.0, 8.0, True),  # ahead and slower: the ego is closing on it
+    (101.0, 14.0, True),  # beside the ego, even a little faster: being passed
+])
+def test_only_a_vehicle_closed_on_or_beside_counts_as_being_passed(s_car, v_car, counted):
+    """The ego out on the oncoming lane of maps/passing_road.yaml at 12 m/s, a car in the route's
+    lane: it is being passed (the fail-safes may complete the pass past it, the verifier holds
+    its speed) only when the ego is beside it or closing on it — a car ahead that drives away
+    at the ego's speed or faster is not, and no fail-safe chases it to pass it."""
+    w = world("scenarios/everyday/overtake_tractor_oncoming.yaml")
+    ctx = context(w)
+    x0 = _on_route(w, 100.0, 3.5, 0.0, 12.0)
+    traffic = place(w, w.traffic0, "tractor", "east", s_car + 10.0, v=v_car)  # the route starts at s = 10
+    e_goal, s_past, e_beside, v_past, _, passed = _back(ctx, traffic, 100.0, 3.5, x0[:3], 12.0)
+    tractor = w.parts.ids.index("tractor")
+    assert bool(passed[tractor]) is counted and passed.sum() == counted
+    assert math.isfinite(s_past) is counted and math.isnan(e_beside) is not counted
+    assert v_past == (pytest.approx(v_car, abs=1e-6) if counted else 0.0)
+    v = verify_step(ctx, x0, KEEP, traffic, 0.0, s_hint=100.0)
+    names = [r.failsafe for r in v.refutations] + ([v.failsafe.name] if v.failsafe else [])
+    assert names and all(n.endswith("back in lane") for n in names)
+    assert any(n.startswith("clear") for n in names) is counted  # completing the pass: only past one closed on

@@ -284,8 +284,12 @@ def _back(ctx: Context, traffic: TrafficState, s_ego: float, e_ego: float, pose:
         half = 0.5 * float(w.route.width_at(np.array([s_ego]))[0])
         length = w.parts.length[idx]
         in_lane = np.abs(e_i) < half + 0.5 * w.parts.width[idx]
-        beside = in_lane & (s_i + length / 2 > s_ego - w.ego.length / 2) & (s_i - s_ego < PASS_REACH)
         along = traffic.v[idx] * np.cos(traffic.psi[idx] - w.route.heading_at(s_i))
+        # being passed: beside the ego, or ahead within reach and slower (the ego closes on it; one
+        # that keeps its distance or draws away is not passed, and no fail-safe chases it)
+        level = s_i - length / 2 < s_ego + w.ego.length / 2
+        beside = in_lane & (s_i + length / 2 > s_ego - w.ego.length / 2) & (s_i - s_ego < PASS_REACH) & (
+            level | (along < v_ego))
         # passed and not yet returned in front of: behind it in the route's lane, slower than it
         behind = in_lane & (s_i < s_ego) & (s_ego - s_i < PASS_REACH) & (along < v_ego)
         passed[idx[behind]] = True
