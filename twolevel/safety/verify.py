@@ -253,8 +253,9 @@ def _back(ctx: Context, traffic: TrafficState, s_ego: float, e_ego: float, pose:
     the route, so that in a bend (where the lane curves under the car) a box within its lane counts
     as within it:
     (lateral offset of the route lane's centre [m], route position its centre must pass to be
-    ahead of the vehicles in the route's lane it is beside or passing, within
-    :data:`PASS_REACH`, with D_safe to spare, −inf when there are none; the lateral offset [m]
+    ahead of the vehicles in the route's lane it is beside or passing (ahead of it within
+    :data:`PASS_REACH` and slower along the route than its ``v_ego``: it closes on them), with
+    D_safe to spare, −inf when there are none; the lateral offset [m]
     beside them on the ego's side, with the clearance each is owed
     (:func:`twolevel.world.clearance.passing_clearance`), NaN when none; the fastest of
     their speeds along the route [m/s] (0 when none: they may drive on at up to it); ``e_ego``;
