@@ -113,3 +113,22 @@ def test_a_margin_the_known_speed_leaves_no_room_for_is_dropped_for_that_step(tm
     assert res.ok and res.status is not PlanStatus.FALLBACK, res.message
     assert res.states[:, 3].max() == pytest.approx(15.0 - EPS, abs=1e-6)
     assert res.rule_robustness["speed_limit"] >= EPS - 1e-9
+
+
+def test_where_no_plan_keeps_the_margins_every_rule_is_planned_on_its_bound(tmp_path: Path) -> None:
+    """Two rules that leave 0.4 m/s between them from 0.5 s on (at least 14 from the next step, at most 14.4 m/s):
+    each alone keeps a 0.5 m/s margin, together they cannot — though no single step's known
+    values say so. The step is planned with both on their bounds instead of falling back (a
+    margin is room for the detailed car, never a reason to brake or keep an old plan)."""
+    (tmp_path / "band.stl").write_text("input float v\nbrisk = always[0.1:1] (v >= 14.0);\n"
+                                       "gentle = always[0.5:1] (v <= 14.4);\n")
+    p = scenario(tmp_path, "{margins: {brisk: 0.5}}", speed=14.2)
+    p.write_text(p.read_text().replace(
+        f"rules: [{{file: {REPO / 'rules' / 'speed_limit.stl'}, constants: {{tol: -15}}}}, "
+        f"{REPO / 'rules' / 'safe_distance.stl'}]", "rules: [band.stl]"))
+    res = _plan(p)
+    assert res.ok and res.status is not PlanStatus.FALLBACK, res.message
+    assert "no plan keeps the margins" in res.message
+    v = res.states[1:, 3]
+    assert (v >= 14.0 + EPS - 1e-6).all() and (v[5:] <= 14.4 - EPS + 1e-6).all()
+    assert res.rule_robustness["brisk"] < 0.5  # the margin could not be kept

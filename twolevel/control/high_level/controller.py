@@ -60,7 +60,7 @@ from twolevel.world.world import World
 
 __all__ = ["HighLevelController", "Carry"]
 
-_OWN_PHASES = ("linearise", "assembly", "solve", "total", "relinearise")
+_OWN_PHASES = ("linearise", "assembly", "solve", "total", "relinearise", "unmargined")
 """Timing entries that are not phases of the solve (the rest sum to ``solve``)."""
 
 
@@ -155,9 +155,11 @@ class HighLevelController:
         return step, hist, P
 
     def build(self, step: StepData, past: Mapping[str, np.ndarray], P: int,
-              drop: frozenset[str] = frozenset(), recover_after: Mapping[str, int] | None = None) -> Assembled:
-        """The step's model with every rule not in ``drop``."""
-        st = self.settings
+              drop: frozenset[str] = frozenset(), recover_after: Mapping[str, int] | None = None,
+              margins: bool = True) -> Assembled:
+        """The step's model with every rule not in ``drop`` (``margins`` False: each on its bound,
+        without the settings' margins)."""
+        st = self.settings if margins else replace(self.settings, margins=())
         rules = self.step_rules(past, P, drop, recover_after)
         key = (P, tuple(r.name for r in rules.requirements))
         use = st.refresh and st.solver == "modes" and not recover_after  # HiGHS: the minimal encoding
@@ -339,12 +341,38 @@ class HighLevelController:
                 step = step2
             else:
                 res = replace(res, timings_ms=tm, qps=res.qps + res2.qps)
+        res = self._unmargined(res, step, past, P, tm, t0)
         if res.ok:
             self.carry = replace(self.carry, previous=PreviousPlan.of(t, res), s_hint=float(step.s_bar[1]),
                                  passing=self._passing(step, res, t))
         elif res.status is PlanStatus.FALLBACK:
             self.carry = replace(self.carry, previous=PreviousPlan.of(t, res), passing=None)
         return res
+
+    def _unmargined(self, res: PlanResult, step: StepData, past: Mapping[str, np.ndarray], P: int,
+                    tm: dict[str, float], t0: float) -> PlanResult:
+        """When no plan keeps the rules with their margins (``MPCSettings.margins``: proven
+        infeasible, within the time limit) the step is planned with every rule on its bound
+        (robustness ≥ eps): a margin is room for what the detailed car realises less well, never
+        a reason to fall back. The encoder already drops a margin at a step whose known values
+        leave no room for it (:func:`~twolevel.compiler.driver.margin_at`); this covers the
+        dynamics leaving none."""
+        st = self.settings
+        lim = st.time_limit
+        names = {r.name for r in self.rules}
+        if res.ok or res.cause is not PlanStatus.INFEASIBLE or not any(n in names for n, m in st.margins if m > 0) \
+                or (lim is not None and time.perf_counter() - t0 > lim):
+            return res
+        t1 = time.perf_counter()
+        asm = self.build(step, past, P, margins=False)
+        tm2: dict[str, float] = {}
+        res2 = self._solve_built(step, asm, tm2, t1)
+        tm["unmargined"] = tm2["total"]
+        tm["total"] = (time.perf_counter() - t0) * 1e3
+        if not res2.ok:
+            return replace(res, timings_ms=tm, qps=res.qps + res2.qps)
+        return replace(res2, timings_ms=tm, qps=res.qps + res2.qps, message="every rule on its bound (no plan keeps "
+                       "the margins)" + (f"; {res2.message}" if res2.message else ""))
 
     def _passing(self, step: StepData, res: PlanResult, t: float) -> Pass | None:
         """The pass of the vehicle ahead under way after a plan made at ``t`` [s]: kept while the
