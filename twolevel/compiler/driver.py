@@ -92,8 +92,8 @@ def encode(
     satisfaction mode at each step where it can be, given the variables' bounds: at a step
     whose value what is known already fixes (the speed and acceleration now, say) below
     ``eps`` + m but not below ``eps``, it is required with plain ``eps`` (listed in
-    ``Encoding.unmargined`` as (name, step)), so a margin never makes a step infeasible that
-    its bound alone does not."""
+    ``Encoding.unmargined`` as (name, step)), so what is known alone never makes a margin
+    infeasible (where the dynamics do, the high level plans the step without margins)."""
     pids = participants_in(signals)
     requirements = [replace(r, formula=expand_quantifiers(r.formula, pids)) for r in requirements]
     rules = {k: expand_quantifiers(v, pids) for k, v in (rules or {}).items()}
