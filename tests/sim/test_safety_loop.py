@@ -23,23 +23,26 @@ SUITE = ROOT / "scenarios" / "everyday"
 MAPS = ROOT / "maps"
 
 
-def paper_mpc(tmp_path: Path, name: str) -> Path:
+def paper_mpc(tmp_path: Path, name: str, *, found: dict | None = None) -> Path:
     """A copy of the suite's scenario whose MPC is the paper's (1 s ahead, no RSS terminal): the
     look-ahead alone keeps clear of the hazards these regressions were found with, and the tests
-    show what the layer adds to the planner they were found under."""
+    show what the layer adds to the planner they were found under. ``found``: the scenario as the
+    regression was found where it has gained more since (``rules`` left out by file name,
+    ``controller`` settings)."""
+    found = found or {}
     doc = yaml.safe_load((SUITE / f"{name}.yaml").read_text())
     doc["map"] = str((SUITE / doc["map"]).resolve())
-    doc["rules"] = [str((SUITE / r).resolve()) for r in doc.get("rules", [])]
-    doc["controller"] = {**doc.get("controller", {}), "horizon_s": 1.0, "rss": False}
+    doc["rules"] = [str((SUITE / r).resolve()) for r in doc.get("rules", []) if Path(r).name not in found.get("without", ())]
+    doc["controller"] = {**doc.get("controller", {}), **found.get("controller", {}), "horizon_s": 1.0, "rss": False}
     path = tmp_path / f"{name}_paper.yaml"
     path.write_text(yaml.safe_dump(doc))
     return path
 
 
 def simulate(tmp_path: Path, name: str, *, duration: float, safety: bool = True, controller: str = "twolevel",
-             tag: str = "", paper: bool = True):  # noqa: ANN201
+             tag: str = "", paper: bool = True, found: dict | None = None):  # noqa: ANN201
     out = tmp_path / f"{name}_{controller}_{'on' if safety else 'off'}{tag}"
-    path = paper_mpc(tmp_path, name) if paper else SUITE / f"{name}.yaml"
+    path = paper_mpc(tmp_path, name, found=found) if paper else SUITE / f"{name}.yaml"
     summary, diags = simulate_scenario(str(path), str(out), safety=safety, controller=controller,
                                        duration=duration, frames=False)
     assert summary is not None and summary.status == "complete", [d.message for d in diags]
@@ -138,10 +141,13 @@ def test_regression_it_never_stops_inside_the_crossing_lane_at_a_stop_sign(tmp_p
     """Before: the ego pulled out into a gap and met a crossing car inside the crossing lane — its
     fault (it used to brake and stand there, a crossing car counting as the car ahead; since a
     crossing car is none, it drives into one). Now: no collision, and it never stands where the
-    crossing lanes are (x from 96.5 to 103.5 m, its front 2.11 m ahead)."""
-    before, _, _ = simulate(tmp_path, "stop_sign_crossing", duration=14.0, safety=False)
+    crossing lanes are (x from 96.5 to 103.5 m, its front 2.11 m ahead). Both runs as it was found:
+    the paper's r_near = 10 m and without the right-of-way rules (with them the MPC waits for a
+    gap itself: tests/sim/test_everyday_junctions.py)."""
+    found = {"without": ("right_of_way.stl",), "controller": {"r_near": 10}}
+    before, _, _ = simulate(tmp_path, "stop_sign_crossing", duration=14.0, safety=False, found=found)
     assert at_fault(before) and 96.5 - 2.11 < at_fault(before)[0].x < 103.5 + 2.11
-    after, _, run = simulate(tmp_path, "stop_sign_crossing", duration=14.0)
+    after, _, run = simulate(tmp_path, "stop_sign_crossing", duration=14.0, found=found)
     assert not after.collisions
     x, v = np.asarray(run.columns["x"]), np.asarray(run.columns["v"])
     standing = np.abs(v) < 0.05
