@@ -8,46 +8,24 @@ refuses a crossing halfway (its braking fail-safe would stop the ego inside the 
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 
-from typer.testing import CliRunner
-
-from twolevel.cli import app
 from twolevel.monitor.tracefile import read_trace
 
 from helpers.judged_runs import judged_run
+from helpers.junction_runs import check_gaps, junction_run
 
 ROOT = Path(__file__).resolve().parents[2]
 TRAFFIC = ROOT / "scenarios" / "traffic"
 
 
-def _monitored(trace_csv: Path, c: dict[str, np.ndarray]) -> None:
-    """``twolevel monitor rules/right_of_way.stl`` on the trace: both rules hold at every sample,
-    and its robustness series are the run's own ``rob_`` columns."""
-    r = CliRunner().invoke(app, ["monitor", str(ROOT / "rules" / "right_of_way.stl"), str(trace_csv),
-                                 "--format", "json", "--series"])
-    assert r.exit_code == 0, r.output
-    for rule in json.loads(r.output)["rules"]:
-        series = np.array([np.inf if v == "inf" else v for v in rule["series"]], dtype=float)
-        np.testing.assert_allclose(series, c[f"rob_{rule['name']}"], rtol=1e-6, atol=1e-6)
-
-
 def _run(tmp_path: Path, name: str, **options: Any) -> dict[str, np.ndarray]:
-    """The scenario run (``options`` to :func:`judged_run`: e.g. the controller) and judged; its
-    trace's columns, the monitor agreeing with them."""
-    path = TRAFFIC / f"{name}.yaml"
-    run_dir = judged_run(path, tmp_path / name, **options)  # goal, no collision at fault, the rules
-    trace, _ = read_trace(str(run_dir / "trace.csv"))
-    assert trace is not None
-    out = {k: np.asarray(v, float) for k, v in trace.columns.items()}
-    out["t"] = np.asarray(trace.t, float)
-    _monitored(run_dir / "trace.csv", out)
-    return out
+    """The scenario run (``options``: e.g. the controller), judged, and its trace's columns."""
+    return junction_run(TRAFFIC / f"{name}.yaml", tmp_path / name, **options)
 
 
 def _moves_off_briskly(c: dict[str, np.ndarray], v_go: float = 4.0, a_go: float = 1.0) -> None:
@@ -68,22 +46,10 @@ def _plan_holds_inside(c: dict[str, np.ndarray]) -> None:
     assert inside.any() and not (inside & (c["candidates"] > 0)).any()
 
 
-def _check_gaps(c: dict[str, np.ndarray], margin: float = 1.5) -> tuple[np.ndarray, np.ndarray]:
-    """No priority car within the margin while the ego is inside; returns (inside, waiting)."""
-    inside = (c["d_zone"] <= 0) & (c["d_zone_out"] > 0)
-    for key in [k for k in c if k.startswith("priority[")]:
-        pid = key[len("priority["):-1]
-        close = (c[key] > 0.5) & (c[f"t_reach[{pid}]"] < margin)
-        assert not (inside & close).any(), pid
-    waiting = (c["v"] < 0.3) & (c["d_zone"] > 0) & (c["d_zone"] < 6.0)
-    assert not (inside & (c["v"] < 0.3) & (c["a"] < 0.5)).any()  # never stood in the junction
-    return inside, waiting
-
-
 @pytest.mark.slow
 def test_yield_sign_waits_for_the_platoon_and_goes_in_the_gap(tmp_path: Path) -> None:
     c = _run(tmp_path, "yield_priority_road")
-    inside, waiting = _check_gaps(c)
+    inside, waiting = check_gaps(c)
     assert waiting.sum() >= 10 and inside.any()
     # while it waited a priority car was coming; it entered after the last one had passed
     first_in = int(np.flatnonzero(inside)[0])
@@ -94,7 +60,7 @@ def test_yield_sign_waits_for_the_platoon_and_goes_in_the_gap(tmp_path: Path) ->
 @pytest.mark.slow
 def test_left_turn_waits_for_oncoming_cars_and_turns_after_them(tmp_path: Path) -> None:
     c = _run(tmp_path, "left_turn_stream")
-    inside, waiting = _check_gaps(c)
+    inside, waiting = check_gaps(c)
     assert waiting.sum() >= 10
     first_in = int(np.flatnonzero(inside)[0])
     # the last oncoming car (about 22 s in) could come sooner at its worst case under the
@@ -105,14 +71,14 @@ def test_left_turn_waits_for_oncoming_cars_and_turns_after_them(tmp_path: Path) 
 @pytest.mark.slow
 def test_all_way_stop_with_crossing_traffic(tmp_path: Path) -> None:
     c = _run(tmp_path, "four_way_stop_crossing")
-    inside, _ = _check_gaps(c)
+    inside, _ = check_gaps(c)
     assert inside.any()
 
 
 @pytest.mark.slow
 def test_blocked_exit_is_not_entered(tmp_path: Path) -> None:
     c = _run(tmp_path, "blocked_exit")
-    inside, waiting = _check_gaps(c)
+    inside, waiting = check_gaps(c)
     # it stood before the junction while the delivery car stood beyond it (until 12 s)
     assert waiting.sum() >= 10 and c["t"][np.flatnonzero(inside)[0]] > 12.0
 
@@ -122,7 +88,7 @@ def test_right_turn_merges_behind_the_stream_from_the_left(tmp_path: Path) -> No
     c = _run(tmp_path, "right_turn_stream")
     _moves_off_briskly(c)
     _plan_holds_inside(c)
-    inside, waiting = _check_gaps(c)
+    inside, waiting = check_gaps(c)
     assert waiting.sum() >= 10
     first_in = int(np.flatnonzero(inside)[0])
     assert np.flatnonzero(waiting)[-1] < first_in
@@ -153,7 +119,7 @@ def test_merge_behind_a_cyclist_after_a_pedestrian(tmp_path: Path) -> None:
     # behind the cyclist a refused correction gives way to the fail-safe (braking), not to a plan
     # that would close in on the cyclist: the collision rule (D_safe) held throughout
     assert (c["rob_no_collision"] >= 0).all()
-    inside, waiting = _check_gaps(c)
+    inside, waiting = check_gaps(c)
     first_in = int(np.flatnonzero(inside)[0])
     # it gave way to the cyclist and to the car on the priority road: in after both had passed
     assert c["t_reach[cyclist]"][first_in] == np.inf and c["t_reach[car]"][first_in] == np.inf
@@ -173,7 +139,7 @@ def test_the_nmpc_baseline_stops_straight_waits_and_clears_the_all_way_stop(tmp_
     0.86 m/s², slower than the clearing the give-way line had let it go for (braked to a stop
     inside). Now: a straight stop at the line, waiting, clearing at CLEAR_ACCEL, the goal."""
     c = _run(tmp_path, "four_way_stop_crossing", controller="nmpc")  # goal, no collision at fault, the rules
-    inside, waiting = _check_gaps(c)
+    inside, waiting = check_gaps(c)
     before = c["d_zone"] > 0
     assert np.max(np.abs(c["e"][before])) < 0.1  # straight in its lane up to the area
     assert waiting.sum() >= 10 and inside.any()
