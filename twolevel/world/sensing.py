@@ -26,6 +26,7 @@ import numpy as np
 from twolevel.models.obb import pose_separation
 from twolevel.stl.analysis import PRESENT, participant_key
 from twolevel.world.area import overtaking_signals
+from twolevel.world.motion import predicted_poses
 from twolevel.world.relations import acceleration, relations
 from twolevel.world.right_of_way import ZONE_PARTICIPANT_SIGNALS, participant_zone_signals, zone_signals
 from twolevel.world.signals import (PASS_MARGIN, STOP_ZONE, StopMemory, ahead_in_lane, rss_gap, sensing_window,
@@ -139,18 +140,17 @@ def others_predicted(world: World, traffic: TrafficState, x: float, y: float, s0
     tk = dt * np.arange(H + 1)
     v = traffic.v[idx]
     psi = traffic.psi[idx]
-    px = traffic.x[idx, None] + (v * np.cos(psi))[:, None] * tk[None]
-    py = traffic.y[idx, None] + (v * np.sin(psi))[:, None] * tk[None]
+    px, py, ppsi = predicted_poses(world, traffic, idx, tk)
     rep = lambda a: np.repeat(a[:, None], H + 1, axis=1)  # noqa: E731
     if not len(idx):
-        return _others(world, idx, px, py, rep(psi), rep(v), tk, 1.0)
+        return _others(world, idx, px, py, ppsi, rep(v), tk, 1.0)
     along = v * np.cos(psi - world.route.heading_at(now.s[:, 0]))
     center = now.s[:, :1] + along[:, None] * tk[None]
     # along a bend of radius R a straight line of length L projects L³/(3R²) short of that
     # (2 m for L = 15 m, R = 20 m): a quarter of the length and 3 m leave room for much tighter
     half = 3.0 + 0.25 * float(np.max(np.abs(v))) * H * dt
-    out = _others(world, idx, px[:, 1:], py[:, 1:], psi[:, None], v[:, None], center[:, 1:], half)
-    return Others(px, py, rep(psi), rep(v), np.concatenate([now.s, out.s], axis=1),
+    out = _others(world, idx, px[:, 1:], py[:, 1:], ppsi[:, 1:], v[:, None], center[:, 1:], half)
+    return Others(px, py, ppsi, rep(v), np.concatenate([now.s, out.s], axis=1),
                   np.concatenate([now.e, out.e], axis=1), now.length, now.width, idx)
 
 

@@ -55,6 +55,7 @@ from twolevel.stl.analysis import PRESENT, participant_key
 from twolevel.world.area import overtaking_signals
 from twolevel.world.assumptions import ResponseBounds, safe_distance
 from twolevel.world.geometry import Route
+from twolevel.world.motion import predicted_poses
 from twolevel.world.provided import PARTICIPANT_SIGNALS, PROVIDED_SIGNALS
 from twolevel.world.relations import LEAD_HEADING, acceleration, relations, same_way
 from twolevel.world.right_of_way import ZONE_PARTICIPANT_SIGNALS, participant_zone_signals, zone_signals
@@ -376,11 +377,11 @@ def horizon_constants(
         states = world.lights.state_at(t if world.settings.v2i else np.full_like(t, t0))[:, world.route_light_index[j]]
         can_stop = dl[j] >= v**2 / (2 * world.settings.yellow_decel)
         light_red = ((states == RED) | ((states == YELLOW) & can_stop)).astype(float)
-    # other vehicles within r_near, constant velocity
+    # other vehicles within r_near, constant velocity (relative to their lanes: world.motion)
     dist = np.hypot(traffic.x - x, traffic.y - y)
     near = np.flatnonzero(traffic.active & (dist <= r_near))
-    vel = traffic.v[near, None] * np.stack([np.cos(traffic.psi[near]), np.sin(traffic.psi[near])], axis=1)
-    xy = traffic.xy[near][:, None, :] + vel[:, None, :] * tau[None, :, None]
+    ox, oy, opsi = predicted_poses(world, traffic, near, tau)
+    xy = np.stack([ox, oy], axis=2)
     lead, s_lead, lead_offset = -1, np.full(H + 1, np.inf), 0.0
     # the vehicle ahead within the sensing range (lead's, when that is within r_near)
     rng = max(world.settings.sensor_range, r_near)
@@ -402,7 +403,7 @@ def horizon_constants(
                 s_lead, lead_offset = s_ahead, ahead_offset
     at = route_lookups(world, np.asarray(s_pred, dtype=float))
     return HorizonConstants(t, np.asarray(s_pred, dtype=float), at["v_max"], s_stop, s_light, light_red, near, xy,
-                            np.repeat(traffic.psi[near, None], H + 1, axis=1), world.parts.length[near],
+                            opsi, world.parts.length[near],
                             world.parts.width[near], traffic.v[near], lead, s_lead, lead_offset, ahead, s_ahead,
                             v_ahead, ahead_offset, e_ahead, seen, si, ei, traffic.v[seen] * along,
                             at["over_offset"], at["solid_left"], at["no_overtaking"])
