@@ -59,3 +59,24 @@ def test_the_mountain_road_is_driven_in_its_lane(tmp_path: Path) -> None:
     v, comfortable = _speed_in_bends("mountain_road", run)
     assert np.all(v <= comfortable * 1.05 + 0.2)
     assert ride is not None and ride.lane_offset < 0.8
+
+
+@pytest.mark.slow
+def test_regression_the_car_follows_the_slower_car_through_the_s_bends_without_braking(tmp_path: Path) -> None:
+    """curvy_road: behind a car at 7 m/s through S-bends of 30–35 m radius, oncoming cars in the
+    other lane. Nothing appears suddenly, so the car follows at a steady gap: goal reached, peak
+    deceleration ≤ 4 m/s², and never the low level's full brake or a fail-safe — where oncoming
+    cars predicted on their tangents into the ego's lane made it brake at 8.9 m/s² (25 steps)."""
+    summary, verdict, ride, run = _run(tmp_path, "curvy_road")
+    assert verdict is not None and verdict.passed, [(c.name, c.detail) for c in verdict.failed]
+    assert ride is not None and ride.goal_t is not None and ride.decel <= 4.0
+    decisions = run.columns["decision"]
+    assert not {"brake", "failsafe", "least_violation"} & set(decisions), sorted(set(decisions))
+    w = build_world(load_scenario(SUITE / "curvy_road.yaml")[0])
+    s, d_lead, v, min_gap = (np.asarray(run.columns[k], float) for k in ("s", "d_lead", "v", "min_gap"))
+    bend = np.abs(w.route.curvature_at(np.clip(s, 0, w.route.length))) > 1e-6
+    following = bend & np.isfinite(d_lead)
+    assert following.sum() >= 50  # it catches up and follows the slower car in the bends
+    assert np.all(d_lead[following] >= 1.0 + 0.5 * v[following])  # keep_gap's bound
+    near = bend & np.isfinite(min_gap)  # the slower car and the oncoming ones, met in the bends
+    assert near.sum() >= 100 and np.min(min_gap[near]) > 1.0

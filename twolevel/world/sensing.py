@@ -11,7 +11,8 @@ written for the closed loop:
   carried from step to step, so the current sample costs O(1), not a replay of the run.
 
 Other vehicles are :class:`Others`: their poses over the same T samples (the actual traffic for
-the current step; constant-velocity predictions over the horizon for the low level, as
+the current step; over the horizon for the low level the predictions of
+:func:`~twolevel.world.motion.predicted_poses` — along their lanes for lane followers — as
 :func:`~twolevel.world.signals.horizon_constants` predicts them for the MPC). Sensing is limited
 to ``r_near`` [m] at every sample, but for ``rss_gap``'s vehicle ahead, sensed within the sensing
 range. Units: m, rad, m/s, s.
@@ -128,7 +129,8 @@ def others_now(world: World, traffic: TrafficState, x: float, y: float, s0: floa
 
 def others_predicted(world: World, traffic: TrafficState, x: float, y: float, s0: float, H: int,
                      dt: float, *, now: Others | None = None) -> Others:
-    """Constant-velocity predictions over k = 0..H of the vehicles within ``r_near`` now (as
+    """Predictions over k = 0..H of the vehicles within ``r_near`` now
+    (:func:`~twolevel.world.motion.predicted_poses`: constant velocity relative to their lanes, as
     :func:`~twolevel.world.signals.horizon_constants` predicts them); ``s0`` [m] is the ego's
     route position. Each vehicle's predicted sample is projected near where its motion along the
     route puts it (s_i + v_i·cos(ψ_i − route heading)·t): a narrow search instead of one as wide

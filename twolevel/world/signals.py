@@ -6,7 +6,7 @@ Two faces, one set of definitions (see :mod:`twolevel.world.provided` for the li
 * :func:`horizon_constants` — over an MPC horizon, the values known at solve time (limits at
   the predicted positions, light states (from their programs with ``v2i``, else the state now
   held over the horizon), stop-line positions, other
-  vehicles' constant-velocity predictions). The MPC treats v_k and s_k as affine in its decision
+  vehicles' predictions: constant velocity relative to their lanes, :mod:`twolevel.world.motion`). The MPC treats v_k and s_k as affine in its decision
   variables and forms d_stop,k = s_stop − s_k, d_light,k = s_light − s_k itself.
 
 Definitions (sensing is limited to ``r_near``):
@@ -291,7 +291,8 @@ class HorizonConstants:
     there. ``s_stop`` [m]: route position of the stop line that applies (+inf if none within
     r_near); ``s_light`` [m] and ``light_red`` (H+1,) ∈ {0, 1} for the light that applies (yellow
     counts as red when the ego can stop at t0). Other vehicles within r_near at t0 (n of them,
-    ``index`` into the participants): constant-velocity predictions ``xy`` (n, H+1, 2) [m], ``psi``
+    ``index`` into the participants): predictions (:func:`~twolevel.world.motion.predicted_poses`)
+    ``xy`` (n, H+1, 2) [m], ``psi``
     (n, H+1) [rad], boxes ``length``/``width`` (n,) [m], speeds ``v`` (n,) [m/s]. ``lead`` is the
     row of the vehicle ahead in the ego's lane (−1 if none), ``s_lead`` (H+1,) [m] its predicted
     route position (centre) and ``lead_offset`` [m] = (L_ego + L_lead)/2, so that

@@ -15,7 +15,8 @@ uses). Consequences, by design:
   candidate, so the car brakes: the paper's rule, and what a safety monitor should do.
 
 The predicted trajectories become the rules' signals by the world's definitions
-(:func:`twolevel.world.sensing.sense`: the other vehicles' constant-velocity predictions,
+(:func:`twolevel.world.sensing.sense`: the other vehicles' predictions, constant velocity relative
+to their lanes (:mod:`twolevel.world.motion`),
 ``collision_free`` as the oriented-box separation), evaluated by the batched offline monitor
 (:func:`twolevel.monitor.batch.evaluate_rules_batch`).
 """
