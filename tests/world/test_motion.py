@@ -104,7 +104,8 @@ def test_regression_an_oncoming_car_in_a_bend_keeps_its_lane_for_the_low_level()
     w = _curvy()
     H, dt = w.settings.H, w.settings.dt
     ego_lane_s = 52.0  # route s = lane s − 5
-    oncoming = float(w.lanes.project(np.array([1]), w.lanes.pose(np.array([0]), np.array([ego_lane_s + 17.0]))[0])[0][0])
+    level = w.lanes.pose(np.array([0]), np.array([ego_lane_s + 17.0]))[0]
+    oncoming = float(w.lanes.project(np.array([1]), level)[0][0])
     # the slow car far ahead, the oncoming car 17 m ahead in the bend, two more far away
     tr = _traffic(w, np.array([0, 1, 1, 1]), np.array([200.0, oncoming, 60.0, 20.0]), np.zeros(4),
                   np.array([7.0, 10.0, 10.0, 10.0]))

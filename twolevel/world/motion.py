@@ -4,10 +4,10 @@
 constant-velocity and manoeuvring vehicles on a lane: the simulator's lane followers) keeps its
 speed and its heading *relative to the lane*: its arc length advances by v·cos(ψ − θ) and its
 lateral offset by v·sin(ψ − θ) per second (θ the lane's heading where it is; a lane change under
-way keeps moving sideways), onto the lane's successor at its end (extrapolated straight past the
-end of a lane without one). In a bend the prediction follows the bend; on a straight lane it is
-the straight line. Everybody else (pedestrians, scripted waypoints, free movers) is predicted in
-a straight line at constant velocity.
+way keeps moving sideways), onto the lane's successor at its end (the first, the one the traffic
+takes; extrapolated straight past the end of a lane without one). In a bend the prediction
+follows the bend; on a straight lane it is the straight line. Everybody else (pedestrians,
+scripted waypoints, free movers) is predicted in a straight line at constant velocity.
 
 Why not the straight line for everybody: an oncoming car in a bend of radius R, predicted on its
 tangent, drifts L²/(2R) towards the outside of the bend after L metres — 1.7 m after 10 m on a

@@ -5,9 +5,9 @@ Two faces, one set of definitions (see :mod:`twolevel.world.provided` for the li
 * :func:`signals_along` — per step along a recorded or simulated ego trajectory (monitors);
 * :func:`horizon_constants` — over an MPC horizon, the values known at solve time (limits at
   the predicted positions, light states (from their programs with ``v2i``, else the state now
-  held over the horizon), stop-line positions, other
-  vehicles' predictions: constant velocity relative to their lanes, :mod:`twolevel.world.motion`). The MPC treats v_k and s_k as affine in its decision
-  variables and forms d_stop,k = s_stop − s_k, d_light,k = s_light − s_k itself.
+  held over the horizon), stop-line positions, other vehicles' predictions: constant velocity
+  relative to their lanes, :mod:`twolevel.world.motion`). The MPC treats v_k and s_k as affine in
+  its decision variables and forms d_stop,k = s_stop − s_k, d_light,k = s_light − s_k itself.
 
 Definitions (sensing is limited to ``r_near``):
 
