@@ -12,7 +12,8 @@ oncoming lane:
   oncoming lane is open to it: the drivable area's outer bounds
   (:func:`twolevel.world.area.drivable_area`: the first lane running against the route, where
   the boundary is crossable from the route's lane — none, dashed, dashed_solid — and outside the
-  no-overtaking zones), less half the ego's width.
+  no-overtaking zones), less half the ego's width and, beyond the oncoming lane, less
+  :data:`EDGE_MARGIN` (the body keeps off the road's edge while it passes).
 * :func:`pass_time` — how long the ego occupies the oncoming lane to pass the vehicle ahead and
   return in front of it: from its speed now, accelerating at the comfort acceleration up to the
   desired speed, until its rear is the vehicle's RSS distance (as a follower of the ego, the
@@ -53,7 +54,7 @@ from twolevel.world.world import World
 
 __all__ = ["oncoming_band", "lateral_due", "lateral_share", "pass_lane", "pass_time", "oncoming_free",
            "sight_suffices", "waiting_room", "room_to_pull_out", "out_of_lane", "OUT_OF_LANE_MARGIN",
-           "LANE_CHANGE_TIME"]
+           "LANE_CHANGE_TIME", "EDGE_MARGIN"]
 
 LANE_CHANGE_TIME = 2.0
 """[s] The time a lane change back into the route's lane takes (as :data:`BESIDE_FROM` allows for
@@ -71,9 +72,27 @@ def _table(world: World, spacing: float = 2.0) -> tuple[np.ndarray, np.ndarray, 
     s = np.arange(0.0, float(world.route.s[-1]) + spacing, spacing)
     area = drivable_area(world.lanes, world.route, s, oncoming=True)
     half = 0.5 * world.ego.width
-    out = (s, area.lo + half, area.hi - half, area.oncoming)
+    out = (s, _edge_bound(area.lo, area.same_lo, -1.0, half), _edge_bound(area.hi, area.same_hi, 1.0, half),
+           area.oncoming)
     _TABLES[world.route] = out
     return out
+
+
+EDGE_MARGIN = 0.5
+"""[m] How far inside the road's edge beyond the oncoming lane the ego's body keeps while it
+passes over that lane (a driver keeps off the edge line; the detailed car's tracking and its
+heading in the lane change take some of it), at most what keeps the oncoming lane's centre line
+within the band."""
+
+
+def _edge_bound(edge: np.ndarray, same: np.ndarray, sign: float, half: float) -> np.ndarray:
+    """The bound [m] of the ego's reference point on one side (``sign`` +1 left, −1 right) whose
+    drivable area reaches the road's ``edge`` [m] and, without the oncoming lane, ``same`` [m]:
+    the body :data:`EDGE_MARGIN` inside the edge where an oncoming lane is taken in on that side
+    (never short of the oncoming lane's centre), else touching it."""
+    reach = sign * (edge - same)  # the oncoming lane's width where it is taken in on this side, else 0
+    margin = np.where(reach > 1e-9, np.minimum(EDGE_MARGIN, np.maximum(0.5 * reach - half, 0.0)), 0.0)
+    return edge - sign * (half + margin)
 
 
 def oncoming_band(world: World, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
