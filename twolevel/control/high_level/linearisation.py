@@ -27,7 +27,7 @@ from twolevel.control.high_level.neighbours import NEIGHBOUR_SIGNALS, NeighbourC
 from twolevel.control.high_level.right_of_way import GapRule, ZoneConstants, give_way_line
 from twolevel.control.high_level.reference import reference, reference_controls, wrap_to
 from twolevel.control.high_level.settings import MPCSettings
-from twolevel.control.high_level.steering import steering_bound, steering_reference, steering_weight
+from twolevel.control.high_level.steering import heading_weight, steering_bound, steering_reference, steering_weight
 from twolevel.control.planner import PreviousPlan
 from twolevel.models import bicycle
 from twolevel.models.params import BicycleParams
@@ -58,7 +58,9 @@ class StepData:
     None when the settings do not ask for it); ``steer_ref`` (N,) [rad]: the steering that follows
     the route's curvature, ``steer_weight`` (N,) [-]: the factor on the steering terms' weights at
     the linearisation point's speeds (:mod:`twolevel.control.high_level.steering`; None: the
-    paper's cost, δ weighed in rad about 0)."""
+    paper's cost, δ weighed in rad about 0); ``head_weight`` (N,) [-]: the factor on the heading's
+    tracking weight while the ego passes over the oncoming lane
+    (:func:`~twolevel.control.high_level.steering.heading_weight`; None: the paper's, ψ in rad)."""
 
     t: float
     x0: np.ndarray
@@ -88,6 +90,7 @@ class StepData:
     steer_weight: np.ndarray | None = None
     zones: ZoneConstants | None = None
     neighbours: NeighbourConstants | None = None
+    head_weight: np.ndarray | None = None
 
     @property
     def N(self) -> int:
@@ -255,11 +258,13 @@ def prepare_step(
     kappa = route.curvature_at(s_ref[:-1])
     v_bar = np.maximum(xs_bar[:-1, 3], x0[3])
     steer_weight = steering_weight(v_bar, params.l_f) if settings.lateral_weight else None
+    # over the oncoming lane the lateral velocity is damped too (the car arrives there fast)
+    head_weight = heading_weight(np.maximum(xs_bar[1:, 3], 0.0)) if settings.lateral_weight and ref.oncoming else None
     return StepData(t, x0, np.asarray(u_prev, float), xs_bar, us_bar, A, B, c, omega, s_ref, s_bar, h_bar, p_bar,
                     lo, hi, hc, width, e_lo, e_hi, term, steering_bound(v_bar, kappa, params), steps, H, rss,
                     steering_reference(kappa, params) if settings.lateral_weight else None, steer_weight, zones,
                     neighbour_constants(world, hc, s_bar, H) if set(NEIGHBOUR_SIGNALS) & set(world.participant_signals)
-                    else None)
+                    else None, head_weight)
 
 
 PASS_FROM_REST = 3.0

@@ -21,7 +21,8 @@ over every step of the look-ahead, each step's terms weighed by its length in pe
 step of 0.5 s counts as five of the paper's: the sum stays a time integral, and a plan gains
 nothing by putting a manoeuvre off into the coarse part). With ``settings.lateral_weight`` the
 steering's terms are δ_k − δ_ref,k (the steering that follows the route) and δ_k − δ_{k−1},
-weighed by the lateral acceleration they cause at the step's speed
+weighed by the lateral acceleration they cause at the step's speed, and while the ego passes over
+the oncoming lane the heading's tracking terms by the lateral velocity they cause
 (:mod:`twolevel.control.high_level.steering`).
 
 Signals of the trace (past samples from ``history``, then now, then k = 1..H: the rules see the
@@ -463,10 +464,13 @@ def _cost(model: MilpModel, step: StepData, lay: Layout, w: Weights) -> None:
     g[nu:nu + 2] = step.u_prev
     g[2 * nu:] = step.omega.ravel()
     w_rows, P, FtW = cs.w, cs.P, cs.FtW
+    scale = np.ones_like(cs.w)
     if step.steer_weight is not None:  # the steering in the lateral acceleration it causes
         g[0:nu:2] = step.steer_ref
-        scale = np.ones_like(cs.w)
         scale[0:nu:2] = scale[nu:2 * nu:2] = step.steer_weight
+    if step.head_weight is not None:  # passing over the oncoming lane: the heading in the lateral velocity it causes
+        scale[2 * nu + 2::4] = step.head_weight
+    if step.steer_weight is not None or step.head_weight is not None:
         w_rows = cs.w * scale
         P, FtW = cs.weighed(w_rows)
     model.P = P
