@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from helpers.world_files import load_world
+from twolevel.models.obb import box_corners
 from twolevel.cli import app
 from twolevel.verdict.criteria import judge
 from twolevel.verdict.judge import judge_run
@@ -101,6 +102,26 @@ def test_a_lane_change_stays_on_the_road_but_leaves_the_lane(road_world) -> None
     assert road.passed and road.get("on_road").measured < 0
     assert not lane.passed and lane.get("on_road").measured == pytest.approx(3.5 - 0.9, abs=0.05)
     assert "left the route's lanes" in lane.get("on_road").detail and "left the map" not in lane.get("on_road").detail
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.floats(0.0, 4.2))
+def test_on_the_road_the_margin_is_to_the_roads_edge_not_to_the_line_between_lanes(road_world, shift: float  # noqa: ANN001
+                                                                                   ) -> None:
+    """Regression: inside the road the margin was the depth inside the one lane holding a corner
+    best, so any lane change (a corner on the line between the lanes) reported "the closest
+    corner 0.00 m from the edge". It is the distance to the road's edge (y = ±3.5 m here)."""
+    x = np.linspace(5, 60, 120)
+    y = -1.75 + shift / (1 + np.exp(-(x - 30) / 4))  # from lane a's centre towards the left edge
+    cols = _columns(x, y)
+    corners = box_corners(cols["x"], cols["y"], cols["psi"], road_world.ego.length, road_world.ego.width)
+    closest = float(np.min(np.minimum(3.5 - corners[..., 1], corners[..., 1] + 3.5)))
+    on_road = judge(Expect(goal=None), road_world, cols, {}, "complete").get("on_road")
+    if closest >= 0:
+        assert on_road.passed and on_road.measured == pytest.approx(-closest, abs=1e-6)
+        assert f"{closest:.2f} m from the edge" in on_road.detail
+    else:
+        assert on_road.measured == pytest.approx(-closest, abs=1e-6)  # outside: as far as the worst corner is
 
 
 def test_collisions_count_unless_the_run_records_the_ego_was_not_at_fault(road_world) -> None:  # noqa: ANN001

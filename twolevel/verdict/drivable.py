@@ -3,7 +3,8 @@ width there (every lane kind but sidewalks, crosswalks and cycle lanes: :data:`R
 
 :func:`outside` gives, for points, how far they are outside it (> 0) or how deep inside the
 lane that holds them best (≤ 0); :func:`box_outside` does it for the ego's box over a whole
-trace (its worst corner at each step). "Left the map" is the extreme case: the reference point
+trace (its worst corner at each step; inside, how close its closest corner comes to the area's
+edge, :func:`edge_depth`, the lines between lanes being no edge). "Left the map" is the extreme case: the reference point
 itself is outside every lane. Lanes are capsules: past a lane's end the distance is to its
 end point, unless the lane continues into another. Vectorised over points and lane intervals, in
 blocks. :func:`area_outside` measures the box against the route's drivable area instead (the
@@ -12,6 +13,7 @@ lateral interval :func:`twolevel.world.area.drivable_area` allows at each route 
 
 from __future__ import annotations
 
+import weakref
 from typing import Sequence
 
 import numpy as np
@@ -19,7 +21,8 @@ import numpy as np
 from twolevel.models.obb import box_corners
 from twolevel.world.geometry import LANE_KINDS, LaneSet, Polyline, Route
 
-__all__ = ["outside", "box_outside", "area_outside", "lane_edges", "road_band", "ROAD_KINDS", "road_lanes"]
+__all__ = ["outside", "box_outside", "area_outside", "lane_edges", "road_band", "ROAD_KINDS", "road_lanes", "outer_edges",
+           "edge_depth"]
 
 ROAD_KINDS = ("driving", "shoulder", "parking", "bus", "restricted")
 """Lane kinds that make up the road a vehicle may be on (not sidewalks, crosswalks, cycle lanes)."""
@@ -85,16 +88,73 @@ def outside(lanes: LaneSet, points: np.ndarray, only: Sequence[int] | None = Non
     return out
 
 
+_EDGE_PROBE = 0.05  # [m] how far beyond a lane's edge a point is probed to tell the area's edge
+_OUTER: "weakref.WeakKeyDictionary[LaneSet, dict[tuple[int, ...] | None, tuple[np.ndarray, np.ndarray]]]" = \
+    weakref.WeakKeyDictionary()
+
+
+def outer_edges(lanes: LaneSet, only: Sequence[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The pieces of the lanes' edges that bound the drivable area (no lane of it beyond them):
+    start points (M, 2) [m] and directions (M, 2) [m]. A lane's edge piece is one where the
+    point :data:`_EDGE_PROBE` beyond its middle is outside every lane of the area (``only``, as
+    for :func:`outside`); the line between two lanes of the area is none. Once per lane set."""
+    key = None if only is None else tuple(sorted(int(i) for i in only))
+    cached = _OUTER.setdefault(lanes, {})
+    if key in cached:
+        return cached[key]
+    keep = lanes.seg_lane >= 0
+    area = road_lanes(lanes) if only is None else np.asarray(list(only), dtype=int)
+    if area is not None:
+        keep &= np.isin(lanes.seg_lane, area)
+    k = np.flatnonzero(keep)
+    mid_c = 0.5 * (lanes.points[k] + lanes.points[k + 1])
+    starts, dirs = [], []
+    for bound in (lanes.left_bound, lanes.right_bound):
+        a, b = bound[k], bound[k + 1]
+        mid = 0.5 * (a + b)
+        away = mid - mid_c
+        away /= np.maximum(np.hypot(away[:, 0], away[:, 1]), 1e-12)[:, None]
+        edge = outside(lanes, mid + _EDGE_PROBE * away, only) > 0
+        starts.append(a[edge])
+        dirs.append((b - a)[edge])
+    out = (np.concatenate(starts).reshape(-1, 2), np.concatenate(dirs).reshape(-1, 2))
+    cached[key] = out
+    return out
+
+
+def edge_depth(lanes: LaneSet, points: np.ndarray, only: Sequence[int] | None = None) -> np.ndarray:
+    """Distance [m] of each point (M, 2) from the drivable area's edge (:func:`outer_edges`; the
+    ends of lanes leading nowhere are not counted): for a point inside the area, how deep inside
+    it is — across the line between two of its lanes, unlike :func:`outside`'s depth in one lane."""
+    pts = np.asarray(points, dtype=float).reshape(-1, 2)
+    a, d = outer_edges(lanes, only)
+    out = np.full(len(pts), np.inf)
+    if a.size == 0:
+        return out
+    l2 = np.maximum(np.einsum("kj,kj->k", d, d), 1e-12)
+    for lo in range(0, len(pts), _BLOCK):
+        rel = pts[lo:lo + _BLOCK, None, :] - a[None]
+        t = np.clip(np.einsum("mkj,kj->mk", rel, d) / l2, 0.0, 1.0)
+        diff = rel - t[..., None] * d[None]
+        out[lo:lo + _BLOCK] = np.sqrt(np.einsum("mkj,mkj->mk", diff, diff).min(axis=1))
+    return out
+
+
 def box_outside(lanes: LaneSet, x: np.ndarray, y: np.ndarray, psi: np.ndarray, length: float, width: float,
                 only: Sequence[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """For each sample of a trajectory, how far the box's worst corner is outside the drivable
-    area [m] (≤ 0: every corner inside), and the reference point's distance outside every lane. At the
-    map's dead ends the area reaches half the box's length on: a box is off the end of the map
-    once its reference point is."""
+    area [m] (≤ 0: every corner inside, and minus how close the closest corner comes to the
+    area's edge, :func:`edge_depth`: a corner over the line between two lanes is not at an edge),
+    and the reference point's distance outside every lane. At the map's dead ends the area reaches
+    half the box's length on: a box is off the end of the map once its reference point is."""
     x, y, psi = (np.asarray(c, dtype=float) for c in (x, y, psi))
     centre = np.stack([x, y], axis=-1)
-    corners = box_corners(x, y, psi, length, width)  # (N, 4, 2)
-    worst = outside(lanes, corners.reshape(-1, 2), only, 0.5 * length).reshape(-1, 4).max(axis=1)
+    corners = box_corners(x, y, psi, length, width).reshape(-1, 2)  # (N·4, 2)
+    each = outside(lanes, corners, only, 0.5 * length)
+    inside = each <= 0
+    if inside.any():  # deeper than in one lane where the lanes beside it are part of the area
+        each[inside] = np.minimum(each[inside], -edge_depth(lanes, corners[inside], only))
+    worst = each.reshape(-1, 4).max(axis=1)
     return worst, outside(lanes, centre)
 
 
