@@ -15,8 +15,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from twolevel.control.high_level.guards import Front, front_of
-from twolevel.control.high_level.overtaking import (oncoming_band, oncoming_free, out_of_lane, room_to_pull_out,
-                                                    waiting_room)
+from twolevel.control.high_level.overtaking import (EDGE_MARGIN, oncoming_band, oncoming_free, out_of_lane,
+                                                    room_to_pull_out, waiting_room)
 from twolevel.models.params import BicycleParams
 from twolevel.safety.failsafe import return_path
 from twolevel.world.assumptions import ResponseBounds, opposite_safe_distance
@@ -42,12 +42,36 @@ def test_the_oncoming_lane_opens_only_where_markings_and_zones_allow() -> None:
     solid = load_world(EVERYDAY / "overtake_solid_line.yaml")  # route s = east's s − 250
     zone = load_world(EVERYDAY / "overtake_tractor_zone.yaml")  # route s = east's s − 500
     lo, hi, open_ = oncoming_band(dashed, np.array([50.0]))
-    assert open_[0] and hi[0] == pytest.approx(3.5 + 1.75 - dashed.ego.width / 2)  # to the oncoming lane's far edge
+    # to the oncoming lane's far edge, the body EDGE_MARGIN inside it
+    assert open_[0] and hi[0] == pytest.approx(3.5 + 1.75 - dashed.ego.width / 2 - EDGE_MARGIN)
     assert out_of_lane(dashed, 50.0) < hi[0]
     for w, s in ((solid, 110.0), (zone, 60.0)):  # east 360 m (solid line), east 560 m (no-overtaking zone)
         lo, hi, open_ = oncoming_band(w, np.array([s]))
         assert not open_[0] and hi[0] == pytest.approx(1.75 - w.ego.width / 2)
     assert oncoming_band(solid, np.array([20.0]))[2][0]  # east 270 m: dashed again
+
+
+@settings(max_examples=30, deadline=None)
+@given(width=st.floats(1.9, 4.5))
+def test_a_pass_keeps_the_body_off_the_roads_edge_but_never_off_the_oncoming_lanes_centre(tmp_path_factory,
+                                                                                         width: float) -> None:
+    """Regression: the band of a pass reached the road's edge less half the ego's width, so the
+    plans drifted until the box's corner was 0.23 m from the edge. Now the body keeps
+    EDGE_MARGIN inside it, except on an oncoming lane too narrow for that beside its centre."""
+    path = tmp_path_factory.mktemp("narrow") / "road.yaml"
+    text = (ROOT / "maps" / "passing_road.yaml").read_text(encoding="utf-8")
+    path.write_text(text.replace("offset: 1.75, width: 3.5", f"offset: {1.75 + (width - 3.5) / 2}, width: {width}"),
+                    encoding="utf-8")
+    scn = (EVERYDAY / "overtake_stalled.yaml").read_text(encoding="utf-8").replace("../../maps/passing_road.yaml",
+                                                                                 str(path))
+    scn_path = path.with_name("scn.yaml")
+    scn_path.write_text(scn.replace("../../rules/", str(ROOT / "rules") + "/"), encoding="utf-8")
+    w = load_world(scn_path)
+    lo, hi, open_ = oncoming_band(w, np.array([50.0]))
+    centre, edge = 1.75 + width / 2, 1.75 + width - w.ego.width / 2  # the oncoming lane's centre; the box at the edge
+    assert open_[0] and lo[0] == pytest.approx(-1.75 + w.ego.width / 2)  # the right edge: no oncoming lane there
+    assert hi[0] == pytest.approx(max(edge - EDGE_MARGIN, min(centre, edge)))
+    assert hi[0] <= edge - min(EDGE_MARGIN, max(width / 2 - w.ego.width / 2, 0.0)) + 1e-9
 
 
 def _gap_accepted(oncoming_at: float | None) -> bool:
