@@ -38,7 +38,8 @@ class Pass:
     ``over`` [m], the least margin [m] by which the gap to any oncoming car ahead exceeded RSS's
     opposite-direction distance while the ego was over the line (+inf: none ahead then), the
     peak deceleration [m/s²] (the recorded ride's), the at-fault collisions and when each
-    oncoming car drew level with the ego (``level`` [s])."""
+    oncoming car drew level with the ego (``level`` [s]), and how close the box came to the road's
+    edge (``edge`` [m], the on_road criterion's)."""
 
     t: np.ndarray
     x: np.ndarray
@@ -49,6 +50,7 @@ class Pass:
     decel: float
     at_fault: int
     level: tuple[float, ...]
+    edge: float = 0.0
 
 
 def _run(tmp_path: Path, name: str) -> Pass:
@@ -66,8 +68,9 @@ def _run(tmp_path: Path, name: str) -> Pass:
     margin = float(np.min(np.where(ahead, gap - need, np.inf))) if len(onc) else float("inf")
     level = tuple(float(t[np.argmax(xo[:, j] <= x)]) if (xo[:, j] <= x).any() else float("inf")
                   for j in range(len(onc)))
+    road = [c for c in run.meta["verdict"]["criteria"] if c["name"] == "on_road"][0]
     return Pass(t, x, y, v, over, margin, float(run.meta["ride"]["decel"]), int(run.meta["summary"]["at_fault"]),
-                level)
+                level, -float(road["measured"]))
 
 
 def _check_pass(p: Pass, obstacle_x: float, *, decel: float = 4.0) -> None:
@@ -134,6 +137,21 @@ def test_the_pull_out_from_rest_is_gentle(runs, name: str) -> None:
     verifier refused the first steps of the pull-out from rest (2 m/s) and the ego braked at
     5.6 m/s² before it went."""
     assert runs(name).decel <= 4.0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["overtake_wait_oncoming", "overtake_oncoming_stream", "overtake_parked_half"])
+def test_a_pass_runs_near_the_passing_lanes_centre_and_off_the_roads_edge(runs, name: str) -> None:
+    """Regression: arriving in the oncoming lane with 1.5–2 m/s of lateral velocity, the plans
+    swung to 4.08 m from the ego's lane's centre (the passing lane's is 3.5 m) and the box came
+    0.23 m from the road's edge. Now the band keeps the body 0.5 m inside the edge and the lateral
+    velocity is damped over the oncoming lane (twolevel/control/high_level/overtaking.py,
+    steering.py)."""
+    p = runs(name)
+    e = p.y - LANE_Y
+    assert e.max() > 3.0  # it passed over the oncoming lane
+    assert e.max() <= 3.85
+    assert p.edge >= 0.3
 
 
 @pytest.mark.slow
