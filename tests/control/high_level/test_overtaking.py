@@ -14,9 +14,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from twolevel.control.high_level.controller import HighLevelController
 from twolevel.control.high_level.guards import Front, front_of
 from twolevel.control.high_level.overtaking import (EDGE_MARGIN, oncoming_band, oncoming_free, out_of_lane,
                                                     room_to_pull_out, waiting_room)
+from twolevel.control.high_level.steering import PASS_DAMPING
 from twolevel.models.params import BicycleParams
 from twolevel.safety.failsafe import return_path
 from twolevel.world.assumptions import ResponseBounds, opposite_safe_distance
@@ -188,3 +190,28 @@ def test_a_pass_begins_only_with_room_to_pull_out(gap: float, v0: float, v_front
     assert room_to_pull_out(w, p, f, s0 - 5.0, v0, 3.4) or not ok
     assert not room_to_pull_out(w, p, f, s0, v0, 3.4) if gap < 5.0 else True  # no lane change is that short
     assert room_to_pull_out(w, p, f, 100.0 - f.offset - w.settings.D_safe - 40.0, 0.0, 3.4)
+
+
+@pytest.mark.parametrize("name, x, passing", [("overtake_stalled", 30.0, True), ("overtake_stalled", 10.0, False),
+                                              ("overtake_solid_line", 270.0, False)])
+def test_over_the_oncoming_lane_the_heading_damps_the_lateral_velocity(name: str, x: float, passing: bool) -> None:
+    """Regression: arriving in the oncoming lane with 1.5–2 m/s of lateral velocity, the plans
+    swung 0.5–0.6 m past the passing lane's centre (the heading weighed in rad, about the ego's
+    own heading). While the reference takes the oncoming lane in, the heading's reference is the
+    route's and its weight in the cost is 1 + PASS_DAMPING·v² (the lateral velocity it causes);
+    elsewhere the paper's cost is untouched."""
+    w = load_world(EVERYDAY / f"{name}.yaml")
+    ctrl, _ = HighLevelController.from_world(w)
+    x0 = np.array([x, w.ego.y, 0.05, w.ego.v])  # 0.05 rad off the route's heading
+    step, past, P = ctrl.prepare(x0, 0.0, w.traffic0, None)
+    asm = ctrl.build(step, past, P)
+    span = step.steps / step.steps[0]
+    diag = asm.model.P.diagonal()[asm.layout.x[:, 2]]  # the heading columns' Hessian: 2·weight·span
+    if not passing:
+        assert step.head_weight is None and np.allclose(step.omega[:, 2], 0.05)  # the ego's heading, as the paper's
+        assert np.allclose(diag, 2.0 * span)
+        return
+    v = step.xs_bar[1:, 3]
+    assert step.head_weight == pytest.approx(1.0 + PASS_DAMPING * v * v)
+    assert np.allclose(step.omega[:, 2], 0.0)  # the route's heading
+    assert diag == pytest.approx(2.0 * span * (1.0 + PASS_DAMPING * v * v))
