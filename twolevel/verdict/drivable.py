@@ -21,8 +21,8 @@ import numpy as np
 from twolevel.models.obb import box_corners
 from twolevel.world.geometry import LANE_KINDS, LaneSet, Polyline, Route
 
-__all__ = ["outside", "box_outside", "area_outside", "lane_edges", "road_band", "ROAD_KINDS", "road_lanes", "outer_edges",
-           "edge_depth"]
+__all__ = ["outside", "box_outside", "area_outside", "lane_edges", "road_band", "ROAD_KINDS", "road_lanes", "edge_depth",
+           "EDGE_REACH"]
 
 ROAD_KINDS = ("driving", "shoulder", "parking", "bus", "restricted")
 """Lane kinds that make up the road a vehicle may be on (not sidewalks, crosswalks, cycle lanes)."""
@@ -89,54 +89,62 @@ def outside(lanes: LaneSet, points: np.ndarray, only: Sequence[int] | None = Non
 
 
 _EDGE_PROBE = 0.05  # [m] how far beyond a lane's edge a point is probed to tell the area's edge
-_OUTER: "weakref.WeakKeyDictionary[LaneSet, dict[tuple[int, ...] | None, tuple[np.ndarray, np.ndarray]]]" = \
+EDGE_REACH = 25.0
+"""[m] How far from a point :func:`edge_depth` looks for the area's edge (deeper counts as that)."""
+_EDGES: "weakref.WeakKeyDictionary[LaneSet, dict[tuple[int, ...] | None, tuple[np.ndarray, ...]]]" = \
     weakref.WeakKeyDictionary()
 
 
-def outer_edges(lanes: LaneSet, only: Sequence[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """The pieces of the lanes' edges that bound the drivable area (no lane of it beyond them):
-    start points (M, 2) [m] and directions (M, 2) [m]. A lane's edge piece is one where the
-    point :data:`_EDGE_PROBE` beyond its middle is outside every lane of the area (``only``, as
-    for :func:`outside`); the line between two lanes of the area is none. Once per lane set."""
+def _edge_pieces(lanes: LaneSet, only: Sequence[int] | None) -> tuple[np.ndarray, ...]:
+    """Every lane edge piece of the area (both sides of every interval): start (M, 2), direction
+    (M, 2), the probe point :data:`_EDGE_PROBE` beyond its middle (M, 2) [m], and whether it bounds
+    the area (M,) (−1: not yet probed; filled in as pieces are needed). Once per lane set."""
     key = None if only is None else tuple(sorted(int(i) for i in only))
-    cached = _OUTER.setdefault(lanes, {})
-    if key in cached:
-        return cached[key]
-    keep = lanes.seg_lane >= 0
-    area = road_lanes(lanes) if only is None else np.asarray(list(only), dtype=int)
-    if area is not None:
-        keep &= np.isin(lanes.seg_lane, area)
-    k = np.flatnonzero(keep)
-    mid_c = 0.5 * (lanes.points[k] + lanes.points[k + 1])
-    starts, dirs = [], []
-    for bound in (lanes.left_bound, lanes.right_bound):
-        a, b = bound[k], bound[k + 1]
+    cached = _EDGES.setdefault(lanes, {})
+    if key not in cached:
+        keep = lanes.seg_lane >= 0
+        area = road_lanes(lanes) if only is None else np.asarray(list(only), dtype=int)
+        if area is not None:
+            keep &= np.isin(lanes.seg_lane, area)
+        k = np.flatnonzero(keep)
+        mid_c = 0.5 * (lanes.points[k] + lanes.points[k + 1])
+        a = np.concatenate([lanes.left_bound[k], lanes.right_bound[k]]).reshape(-1, 2)
+        b = np.concatenate([lanes.left_bound[k + 1], lanes.right_bound[k + 1]]).reshape(-1, 2)
         mid = 0.5 * (a + b)
-        away = mid - mid_c
+        away = mid - np.concatenate([mid_c, mid_c]).reshape(-1, 2)
         away /= np.maximum(np.hypot(away[:, 0], away[:, 1]), 1e-12)[:, None]
-        edge = outside(lanes, mid + _EDGE_PROBE * away, only) > 0
-        starts.append(a[edge])
-        dirs.append((b - a)[edge])
-    out = (np.concatenate(starts).reshape(-1, 2), np.concatenate(dirs).reshape(-1, 2))
-    cached[key] = out
-    return out
+        cached[key] = (a, b - a, mid + _EDGE_PROBE * away, np.full(len(a), -1, dtype=np.int8))
+    return cached[key]
 
 
 def edge_depth(lanes: LaneSet, points: np.ndarray, only: Sequence[int] | None = None) -> np.ndarray:
-    """Distance [m] of each point (M, 2) from the drivable area's edge (:func:`outer_edges`; the
-    ends of lanes leading nowhere are not counted): for a point inside the area, how deep inside
-    it is — across the line between two of its lanes, unlike :func:`outside`'s depth in one lane."""
+    """Distance [m] of each point (M, 2) from the drivable area's edge, at most
+    :data:`EDGE_REACH`: for a point inside the area, how deep inside it is — across the line
+    between two of its lanes, unlike :func:`outside`'s depth in one lane. The edge is made of the
+    lane edge pieces with no lane of the area (``only``, as for :func:`outside`) beyond them
+    (probed :data:`_EDGE_PROBE` beyond their middle, only those within reach of the points); the ends of lanes
+    leading nowhere are not counted."""
     pts = np.asarray(points, dtype=float).reshape(-1, 2)
-    a, d = outer_edges(lanes, only)
-    out = np.full(len(pts), np.inf)
-    if a.size == 0:
+    out = np.full(len(pts), EDGE_REACH)
+    if not len(pts):
         return out
+    a, d, probe, outer = _edge_pieces(lanes, only)
+    lo, hi = pts.min(axis=0) - EDGE_REACH, pts.max(axis=0) + EDGE_REACH
+    b = a + d
+    near = np.all((np.minimum(a, b) <= hi) & (np.maximum(a, b) >= lo), axis=1)  # pieces within reach of the points
+    new = near & (outer < 0)
+    if new.any():
+        outer[new] = outside(lanes, probe[new], only) > 0
+    use = np.flatnonzero(near & (outer == 1))
+    if not len(use):
+        return out
+    a, d = a[use], d[use]
     l2 = np.maximum(np.einsum("kj,kj->k", d, d), 1e-12)
-    for lo in range(0, len(pts), _BLOCK):
-        rel = pts[lo:lo + _BLOCK, None, :] - a[None]
+    for i in range(0, len(pts), _BLOCK):
+        rel = pts[i:i + _BLOCK, None, :] - a[None]
         t = np.clip(np.einsum("mkj,kj->mk", rel, d) / l2, 0.0, 1.0)
         diff = rel - t[..., None] * d[None]
-        out[lo:lo + _BLOCK] = np.sqrt(np.einsum("mkj,mkj->mk", diff, diff).min(axis=1))
+        out[i:i + _BLOCK] = np.minimum(out[i:i + _BLOCK], np.sqrt(np.einsum("mkj,mkj->mk", diff, diff).min(axis=1)))
     return out
 
 
