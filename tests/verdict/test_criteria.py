@@ -106,8 +106,7 @@ def test_a_lane_change_stays_on_the_road_but_leaves_the_lane(road_world) -> None
 
 @settings(max_examples=25, deadline=None)
 @given(st.floats(0.0, 4.2))
-def test_on_the_road_the_margin_is_to_the_roads_edge_not_to_the_line_between_lanes(road_world, shift: float  # noqa: ANN001
-                                                                                   ) -> None:
+def test_on_the_road_the_margin_is_to_the_roads_edge_not_between_lanes(road_world, shift: float) -> None:  # noqa: ANN001
     """Regression: inside the road the margin was the depth inside the one lane holding a corner
     best, so any lane change (a corner on the line between the lanes) reported "the closest
     corner 0.00 m from the edge". It is the distance to the road's edge (y = ±3.5 m here)."""

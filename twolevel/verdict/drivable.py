@@ -4,8 +4,8 @@ width there (every lane kind but sidewalks, crosswalks and cycle lanes: :data:`R
 :func:`outside` gives, for points, how far they are outside it (> 0) or how deep inside the
 lane that holds them best (≤ 0); :func:`box_outside` does it for the ego's box over a whole
 trace (its worst corner at each step; inside, how close its closest corner comes to the area's
-edge, :func:`edge_depth`, the lines between lanes being no edge). "Left the map" is the extreme case: the reference point
-itself is outside every lane. Lanes are capsules: past a lane's end the distance is to its
+edge, :func:`edge_depth`, the lines between lanes being no edge). "Left the map" is the extreme
+case: the reference point itself is outside every lane. Lanes are capsules: past a lane's end the distance is to its
 end point, unless the lane continues into another. Vectorised over points and lane intervals, in
 blocks. :func:`area_outside` measures the box against the route's drivable area instead (the
 lateral interval :func:`twolevel.world.area.drivable_area` allows at each route position).
@@ -21,8 +21,8 @@ import numpy as np
 from twolevel.models.obb import box_corners
 from twolevel.world.geometry import LANE_KINDS, LaneSet, Polyline, Route
 
-__all__ = ["outside", "box_outside", "area_outside", "lane_edges", "road_band", "ROAD_KINDS", "road_lanes", "edge_depth",
-           "EDGE_REACH"]
+__all__ = ["outside", "box_outside", "area_outside", "lane_edges", "road_band", "ROAD_KINDS", "road_lanes",
+           "edge_depth", "EDGE_REACH"]
 
 ROAD_KINDS = ("driving", "shoulder", "parking", "bus", "restricted")
 """Lane kinds that make up the road a vehicle may be on (not sidewalks, crosswalks, cycle lanes)."""
@@ -122,8 +122,8 @@ def edge_depth(lanes: LaneSet, points: np.ndarray, only: Sequence[int] | None = 
     :data:`EDGE_REACH`: for a point inside the area, how deep inside it is — across the line
     between two of its lanes, unlike :func:`outside`'s depth in one lane. The edge is made of the
     lane edge pieces with no lane of the area (``only``, as for :func:`outside`) beyond them
-    (probed :data:`_EDGE_PROBE` beyond their middle, only those within reach of the points); the ends of lanes
-    leading nowhere are not counted."""
+    (probed :data:`_EDGE_PROBE` beyond their middle, only those within reach of the points); the
+    ends of lanes leading nowhere are not counted."""
     pts = np.asarray(points, dtype=float).reshape(-1, 2)
     out = np.full(len(pts), EDGE_REACH)
     if not len(pts):

@@ -230,8 +230,8 @@ def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, set
     v_ref = np.minimum(v_ref, route.limit_at(s_ref))
     pts = route.position(s_ref, lane)
     head = wrap_to(route.heading_at(s_ref), float(x0[2]))
-    # the heading from the ego's now along the route's turns; over the oncoming lane the route's
-    # own, which the heading's damping there pulls towards (steering.heading_weight)
+    # the ego's heading now, turned as the route turns; over the oncoming lane the route's own
+    # heading, towards which the heading is damped there (heading_weight)
     head = (head[0] if oncoming else x0[2]) + np.concatenate([[0.0], np.cumsum(wrap_to(np.diff(head), 0.0))])
     omega = np.column_stack([pts[1:], head[1:], v_ref[1:]])
     return Reference(s0, float(e_arr[0]), s_ref, v_ref, omega, hc, d_brake, v_brake, front, sides, lateral, beside,
