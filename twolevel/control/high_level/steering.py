@@ -28,7 +28,7 @@ a crawl, where steering is cheap and the heading grows to 0.3–0.4 rad), and wi
 weighed in radians only the offset's 1 rad/s loop damped it (ζ ≈ 0.7): the plan swung 0.5–0.6 m
 past the passing lane's centre, towards the road's edge. Weighed by :data:`PASS_DAMPING` ·
 (lateral velocity)², the loop is over-damped (ζ ≈ 1.1): measured on the passing scenarios, the
-widest point of a pass 3.47–3.81 m from the route lane's centre (passing lane 3.5 m) instead of
+widest point of a pass 3.49–3.81 m from the route lane's centre (passing lane 3.5 m) instead of
 3.79–4.08 m.
 
 Functions take numpy arrays or casadi symbols (plain arithmetic).
