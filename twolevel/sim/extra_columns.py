@@ -5,6 +5,8 @@ signals when the scenario's rules quantify over participants.
   vehicle ahead), ``thw_s`` (time headway), ``dhw_m`` (distance headway), ``ttc_any_s`` (time to
   collision with any participant within r_near, constant velocities); +inf when there is no
   vehicle ahead or no collision course. The time to react is the safety layer's column.
+* **On-demand signals** (:data:`twolevel.world.provided.ON_DEMAND_SIGNALS`: ``xwalk_busy``,
+  ``d_xwalk``): those a rule reads, as sensing gives them.
 * **Participants** (:mod:`twolevel.world.provided`): for every participant of the scenario and
   every participant signal the rules read, the column ``NAME[ID]``, and ``present[ID]`` (+inf
   while it is within r_near, −inf elsewhere, where its other columns hold their absent values).
@@ -34,7 +36,8 @@ CRITICALITY_COLUMNS = ("ttc_s", "thw_s", "dhw_m", "ttc_any_s")
 
 class ExtraColumns:
     """The extra columns of one run of ``world``: :attr:`columns` in the trace (criticality
-    first), :attr:`signals` in every sample (the participants' signals), :attr:`ids` the
+    first), :attr:`signals` in every sample (the on-demand signals the rules read, :attr:`demand`,
+    then the participants' signals), :attr:`ids` the
     participants the rules' quantifiers range over (none when no rule quantifies)."""
 
     def __init__(self, world: World) -> None:
@@ -42,7 +45,8 @@ class ExtraColumns:
         names = world.participant_signals
         self.ids: tuple[str, ...] = world.parts.ids if names else ()
         self.names = names
-        self.signals: tuple[str, ...] = tuple(participant_key(n, pid) for pid in self.ids for n in names)
+        self.demand: tuple[str, ...] = world.on_demand_signals
+        self.signals: tuple[str, ...] = self.demand + tuple(participant_key(n, pid) for pid in self.ids for n in names)
         self.columns: tuple[str, ...] = CRITICALITY_COLUMNS + self.signals
         self._absent = absent_sample(names)
         self._v: dict[str, float] = {}  # v(o) at the previous sample of each participant present there
@@ -53,6 +57,7 @@ class ExtraColumns:
         this step's extra cells; ``pose`` = (x, y, psi, v) of the ego [m, m, rad, m/s], ``others``
         the vehicles sensed (within r_near)."""
         cells = self._criticality(now, pose, others)
+        cells.update({key: now[key] for key in self.demand})
         if not self.ids:
             return cells
         dt = self.world.settings.dt
@@ -67,7 +72,7 @@ class ExtraColumns:
             else:
                 now.update({participant_key(n, pid): value for n, value in self._absent.items()})
         self._v = seen
-        cells.update({key: now[key] for key in self.signals})
+        cells.update({key: now[key] for key in self.signals[len(self.demand):]})
         return cells
 
     def _criticality(self, now: Mapping[str, float], pose: tuple[float, float, float, float], others: Others

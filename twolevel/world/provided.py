@@ -32,7 +32,17 @@ over_centre   m      how far the ego's body reaches over the centre line (the bo
 solid_left    1/0    1 when that centre line is solid at the ego's route position (may not be crossed
                      from the ego's side)
 no_overtaking 1/0    1 inside a no-overtaking zone of the route's lane
+xwalk_busy    1/0    1 while a marked crosswalk ahead on the route has a pedestrian waiting at its
+                     kerb or walking on it, not yet past the ego's lane (a waiting one only while
+                     the ego can stop before the line at 4 m/s²); else 0
+d_xwalk       m      route distance to the line before that crosswalk (where the ego's front stands
+                     STOP_SHORT before its centre, as other traffic stops; negative once past it,
+                     up to PASS_MARGIN; +inf if none within r_near)
 ============  =====  ===============================================================
+
+``xwalk_busy`` and ``d_xwalk`` (:mod:`twolevel.world.crosswalks`) are *on demand*
+(:data:`ON_DEMAND_SIGNALS`): always sensed, but recorded in a run's trace and history only when a
+loaded rule reads them (so a run without such a rule keeps its columns).
 
 **Participant signals** relate one other participant o to the ego; a rule reads them inside a
 quantifier (``forall o in vehicles: d_lon(o) > 0``). Both are projected on the ego's route: route
@@ -104,11 +114,15 @@ from typing import Mapping
 SIGNALS: tuple[str, ...] = ("x", "y", "psi", "v", "a", "delta", "s", "e", "v_max", "d_stop", "light_red",
                             "d_light", "d_lead", "v_lead", "min_gap", "n_near", "rss_gap", "d_zone", "d_zone_out",
                             "t_zone", "t_zone_out", "over_centre", "solid_left", "no_overtaking")
-"""Every signal the world provides, in the order of the table above (the one list of their names:
-the simulator's history and trace columns follow this order)."""
+"""Every signal the world provides and a run always records, in the order of the table above (the
+one list of their names: the simulator's history and trace columns follow this order)."""
 
-PROVIDED_SIGNALS: frozenset[str] = frozenset(SIGNALS)
-"""The same names as a set (what the type checker accepts as a rule's inputs)."""
+ON_DEMAND_SIGNALS: tuple[str, ...] = ("xwalk_busy", "d_xwalk")
+"""Signals the world provides that a run records only when a loaded rule reads them (after
+:data:`SIGNALS` in the table above)."""
+
+PROVIDED_SIGNALS: frozenset[str] = frozenset(SIGNALS + ON_DEMAND_SIGNALS)
+"""Every name a rule may read as an input (what the type checker accepts)."""
 
 PARTICIPANT_SIGNALS: tuple[str, ...] = ("v", "a", "d_lon", "d_lat", "in_same_lane", "cut_in", "precedes", "t_reach",
                                         "t_clear", "priority", "d_exit", "d_behind", "left_of")
@@ -123,5 +137,5 @@ PARTICIPANT_ABSENT: Mapping[str, float] = MappingProxyType({
     "d_exit": -math.inf, "d_behind": math.inf, "left_of": -math.inf})
 """Each participant signal's value where its participant is absent."""
 
-__all__ = ["SIGNALS", "PROVIDED_SIGNALS", "PARTICIPANT_SIGNALS", "PROVIDED_PARTICIPANT_SIGNALS",
+__all__ = ["SIGNALS", "ON_DEMAND_SIGNALS", "PROVIDED_SIGNALS", "PARTICIPANT_SIGNALS", "PROVIDED_PARTICIPANT_SIGNALS",
            "PARTICIPANT_ABSENT"]

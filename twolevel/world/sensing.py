@@ -30,8 +30,8 @@ from twolevel.world.area import overtaking_signals
 from twolevel.world.motion import predicted_poses
 from twolevel.world.relations import acceleration, relations
 from twolevel.world.right_of_way import ZONE_PARTICIPANT_SIGNALS, participant_zone_signals, zone_signals
-from twolevel.world.signals import (PASS_MARGIN, STOP_ZONE, StopMemory, ahead_in_lane, rss_gap, sensing_window,
-                                    update_stop_memory)
+from twolevel.world.signals import (PASS_MARGIN, STOP_ZONE, StopMemory, ahead_in_lane, crosswalks_seen, rss_gap,
+                                    sensing_window, update_stop_memory)
 from twolevel.world.traffic import RED, YELLOW, TrafficState
 from twolevel.world.world import World
 
@@ -201,9 +201,24 @@ def sense(world: World, t0: float, dt: float, memory: Memory, others: Others, x:
     out.update(_lead_and_gap(world, others, x, y, psi, s, e, v))
     out.update(zone_signals(world, s, v))
     out.update(overtaking_signals(world.lanes, route, s, e, world.ego.width))
+    out["xwalk_busy"], out["d_xwalk"] = _crosswalks(world, others, x, y, s, v)
     if world.participant_signals and others.n:
         out.update(_participants(world, others, x, y, psi, s, e, dt, t0))
     return out
+
+
+def _crosswalks(world: World, others: Others, x: np.ndarray, y: np.ndarray, s: np.ndarray, v: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """``xwalk_busy`` and ``d_xwalk`` (K, T): the pedestrians among ``others`` present where they
+    are within r_near and were when sensed (as for the neighbourhood's signals)."""
+    if world.crosswalks.n == 0 or others.n == 0:  # no pedestrian to see: busy 0, the lines' distances
+        none = np.zeros(s.shape + (0,))
+        return crosswalks_seen(world, s, v, np.zeros(0, int), none, none, none.astype(bool))
+    ox, oy = others.x.T[None], others.y.T[None]  # (1, T, n)
+    dist = np.hypot(ox - x[..., None], oy - y[..., None])
+    r = world.settings.r_near
+    near = (dist <= r) & (dist[:, :1] <= r)
+    return crosswalks_seen(world, s, v, others.index, ox, oy, near)
 
 
 def _participants(world: World, others: Others, x: np.ndarray, y: np.ndarray, psi: np.ndarray, s: np.ndarray,

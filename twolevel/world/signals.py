@@ -39,6 +39,8 @@ Definitions (sensing is limited to ``r_near``):
   within the assumptions. +inf if none.
 * ``over_centre``, ``solid_left``, ``no_overtaking``: the centre line left of the route (the
   boundary to the first lane running against it) at s, :func:`twolevel.world.area.overtaking_signals`.
+* ``xwalk_busy``, ``d_xwalk``: the marked crosswalks on the route and their pedestrians,
+  :func:`twolevel.world.crosswalks.crosswalk_signals` (pedestrians within r_near).
 * Participant signals (``d_lon[ID]``, ``present[ID]``, …; :mod:`twolevel.world.provided`):
   :func:`participant_signals_along`, with each participant projected as for ``d_lead``.
 """
@@ -54,6 +56,7 @@ from twolevel.models.obb import box_corners, box_separation
 from twolevel.stl.analysis import PRESENT, participant_key
 from twolevel.world.area import overtaking_signals
 from twolevel.world.assumptions import ResponseBounds, safe_distance
+from twolevel.world.crosswalks import YIELD_DECEL, crosswalk_signals, positions_of
 from twolevel.world.geometry import Route
 from twolevel.world.motion import predicted_poses
 from twolevel.world.provided import PARTICIPANT_SIGNALS, PROVIDED_SIGNALS
@@ -64,7 +67,7 @@ from twolevel.world.world import World
 
 __all__ = ["PASS_MARGIN", "STOP_ZONE", "LEAD_HEADING", "TrafficLog", "StopMemory", "HorizonConstants", "signals_along",
            "participant_signals_along", "horizon_constants", "route_lookups", "update_stop_memory", "same_way",
-           "ahead_in_lane", "rss_gap", "sensing_window"]
+           "ahead_in_lane", "rss_gap", "sensing_window", "crosswalks_seen"]
 
 PASS_MARGIN = 5.0  # [m] how far past a stop line it still counts (so running it is visible)
 STOP_ZONE = 3.0  # [m] a stop counts for a stop sign when made at most this far before its line
@@ -147,6 +150,16 @@ def _light(world: World, t: np.ndarray, s: np.ndarray, v: np.ndarray) -> tuple[n
     d_light = dd[r, j]
     red = np.where(np.isfinite(d_light), must[r, j], False).astype(float)
     return red, d_light
+
+
+def crosswalks_seen(world: World, s: np.ndarray, v: np.ndarray, index: np.ndarray, x: np.ndarray, y: np.ndarray,
+                    present: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``xwalk_busy`` and ``d_xwalk`` (shape S) for an ego at route positions ``s`` [m] with speeds
+    ``v`` [m/s] (shape S) among participants ``index`` (n,) at ``x``, ``y`` [m] (S + (n,)),
+    ``present`` (S + (n,)) where active and within r_near (:mod:`twolevel.world.crosswalks`)."""
+    cw = world.crosswalks
+    xy, here = positions_of(cw, np.asarray(index), x, y, present)
+    return crosswalk_signals(cw, s, v, xy, here, r_near=world.settings.r_near, decel=YIELD_DECEL, pass_margin=PASS_MARGIN)
 
 
 def sensing_window(world: World) -> float:
@@ -246,6 +259,14 @@ def signals_along(
     out.update(_others(world, traffic, x, y, psi, s, e, v))
     out.update(zone_signals(world, s, v))
     out.update(overtaking_signals(world.lanes, route, s, e, world.ego.width))
+    if traffic is None:
+        nobody = np.zeros((n, 0))
+        out["xwalk_busy"], out["d_xwalk"] = crosswalks_seen(world, s, v, np.zeros(0, int), nobody, nobody,
+                                                            nobody.astype(bool))
+    else:
+        near = traffic.active & (np.hypot(traffic.x - x[:, None], traffic.y - y[:, None]) <= world.settings.r_near)
+        out["xwalk_busy"], out["d_xwalk"] = crosswalks_seen(world, s, v, np.arange(traffic.x.shape[1]), traffic.x,
+                                                            traffic.y, near)
     assert set(out) == PROVIDED_SIGNALS
     return out
 
@@ -302,7 +323,10 @@ class HorizonConstants:
     the route, ``e_ahead`` [m] its lateral offset from the route and ``ahead_offset`` [m] =
     (L_ego + L_ahead)/2 (``rss_gap``'s vehicle). Every vehicle within the sensing range: ``seen``
     (m,) participant indices, ``seen_s``/``seen_e`` (m,) [m] route coordinates now, ``seen_v``
-    (m,) [m/s] speeds along the route (< 0 against it).
+    (m,) [m/s] speeds along the route (< 0 against it). ``s_xwalk`` [m]: the line of the crosswalk
+    ``d_xwalk`` measures to now (+inf if none), ``xwalk_busy`` (H+1,) ∈ {0, 1} its ``xwalk_busy``
+    now, held over the horizon (where the pedestrians will be is not predicted: one waiting or
+    crossing now keeps the line closed until a later solve sees them past the ego's lane).
     """
 
     t: np.ndarray
@@ -329,6 +353,8 @@ class HorizonConstants:
     seen_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
     seen_e: np.ndarray = field(default_factory=lambda: np.zeros(0))
     seen_v: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    s_xwalk: float = np.inf
+    xwalk_busy: np.ndarray = field(default_factory=lambda: np.zeros(1))
     over_offset: np.ndarray = field(default_factory=lambda: np.full(1, -np.inf))
     solid_left: np.ndarray = field(default_factory=lambda: np.zeros(1))
     no_overtaking: np.ndarray = field(default_factory=lambda: np.zeros(1))
@@ -403,11 +429,15 @@ def horizon_constants(
                 lead = int(np.searchsorted(near, ahead))
                 s_lead, lead_offset = s_ahead, ahead_offset
     at = route_lookups(world, np.asarray(s_pred, dtype=float))
+    busy, d_x = crosswalks_seen(world, np.array(s0), np.array(v), near, traffic.x[near], traffic.y[near],
+                                np.ones(len(near), dtype=bool))
+    s_xwalk = s0 + float(d_x) if np.isfinite(d_x) else np.inf
     return HorizonConstants(t, np.asarray(s_pred, dtype=float), at["v_max"], s_stop, s_light, light_red, near, xy,
                             opsi, world.parts.length[near],
                             world.parts.width[near], traffic.v[near], lead, s_lead, lead_offset, ahead, s_ahead,
                             v_ahead, ahead_offset, e_ahead, seen, si, ei, traffic.v[seen] * along,
-                            at["over_offset"], at["solid_left"], at["no_overtaking"])
+                            s_xwalk, np.full(H + 1, float(busy)), at["over_offset"], at["solid_left"],
+                            at["no_overtaking"])
 
 
 def route_lookups(world: World, s_ref: np.ndarray) -> dict[str, np.ndarray]:

@@ -29,6 +29,7 @@ from twolevel.world.traffic import GREEN, RED, YELLOW, Lights, Participants, Spe
 from twolevel.world.traffic.junctions import conflicts_of
 
 if TYPE_CHECKING:
+    from twolevel.world.crosswalks import RouteCrosswalks
     from twolevel.world.right_of_way import RouteZones
 
 __all__ = ["EgoStart", "Settings", "World", "build_world"]
@@ -122,6 +123,26 @@ class World:
         from twolevel.world.relations import signals_read_by
 
         return signals_read_by(load_rulesets(self)[0])
+
+    @cached_property
+    def on_demand_signals(self) -> tuple[str, ...]:
+        """The on-demand signals (:data:`~twolevel.world.provided.ON_DEMAND_SIGNALS`) the
+        scenario's rules read, in that order: what a run records besides the others."""
+        from twolevel.stl.analysis import signals_read
+        from twolevel.world.provided import ON_DEMAND_SIGNALS
+
+        read: set[str] = set()
+        for rs in load_rulesets(self)[0]:
+            for r in rs.rules:
+                read |= signals_read(r.formula)
+        return tuple(n for n in ON_DEMAND_SIGNALS if n in read)
+
+    @cached_property
+    def crosswalks(self) -> "RouteCrosswalks":
+        """The marked crosswalks on the route (:mod:`twolevel.world.crosswalks`)."""
+        from twolevel.world.crosswalks import route_crosswalks
+
+        return route_crosswalks(self)
 
     @cached_property
     def zones(self) -> "RouteZones":
