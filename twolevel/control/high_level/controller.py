@@ -95,7 +95,8 @@ class HighLevelController:
         self.rules, diags = mpc_rules(rulesets, self.settings.dt)
         self.diagnostics: list[Diagnostic] = diags
         reads_all = set().union(*(r.reads for r in self.rules)) if self.rules else set()
-        self.stop_rules = ("d_stop" in reads_all, bool({"light_red", "d_light"} & reads_all))
+        self.stop_rules = ("d_stop" in reads_all, bool({"light_red", "d_light"} & reads_all),
+                           bool({"xwalk_busy", "d_xwalk"} & reads_all))
         self.gap = gap_rule(rulesets)
         self.templates = TemplateCache(capacity=4)
         self.carry = Carry()

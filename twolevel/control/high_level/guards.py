@@ -6,7 +6,8 @@ at the end of its look-ahead, :mod:`twolevel.control.high_level.settings`):
 
 * :func:`stop_lines` — the stop line the plan must keep behind at each step of the horizon: the
   stop sign's line while it applies (not yet served, within r_near; the world's definition in
-  :mod:`twolevel.world.signals`), and a traffic light's line at the steps where the light is red.
+  :mod:`twolevel.world.signals`), a traffic light's line at the steps where the light is red, and
+  a marked crosswalk's line while it is busy (:mod:`twolevel.world.crosswalks`).
 * **Can still stop** at the end of the horizon (recursive feasibility): with d_H = s_line − s_H
   − margin the distance left after the last step and b a comfortable deceleration, the exact
   condition is v_H² ≤ 2·b·d_H (the NMPC writes it so). The MILP needs it linear:
@@ -69,16 +70,19 @@ swerve in its coarse part, and the car drives on at the vehicle ahead). 2 s leav
 lane change at the bicycle's lateral acceleration limit."""
 
 
-def stop_lines(hc: HorizonConstants, *, stop: bool, light: bool) -> np.ndarray:
+def stop_lines(hc: HorizonConstants, *, stop: bool, light: bool, xwalk: bool = False) -> np.ndarray:
     """Route position [m] of the line the ego must stay behind at each step k = 0..H (+inf: none):
-    the stop sign's line that applies (``stop``: a rule reads d_stop) and the light's line while
-    it is red (``light``: a rule reads light_red or d_light)."""
+    the stop sign's line that applies (``stop``: a rule reads d_stop), the light's line while
+    it is red (``light``: a rule reads light_red or d_light) and a crosswalk's line while it is
+    busy (``xwalk``: a rule reads xwalk_busy or d_xwalk)."""
     n = len(hc.t)
     out = np.full(n, np.inf)
     if stop and math.isfinite(hc.s_stop):
         out[:] = hc.s_stop
     if light and math.isfinite(hc.s_light):
         out = np.where(hc.light_red > 0.5, np.minimum(out, hc.s_light), out)
+    if xwalk and math.isfinite(hc.s_xwalk):
+        out = np.where(hc.xwalk_busy > 0.5, np.minimum(out, hc.s_xwalk), out)
     return out
 
 

@@ -167,7 +167,7 @@ def sensing_bound(v0: float, ticks: np.ndarray, dt: float, v_sense: float, brake
 def prepare_step(
     world: World, x0: np.ndarray, t: float, traffic: TrafficState, settings: MPCSettings, params: BicycleParams,
     *, prev: PreviousPlan | None = None, u_prev: np.ndarray | None = None, memory: StopMemory | None = None,
-    s_hint: float | None = None, about: str = "plan", stop_rules: tuple[bool, bool] = (False, False),
+    s_hint: float | None = None, about: str = "plan", stop_rules: tuple[bool, bool, bool] = (False, False, False),
     passing: Pass | None = None, gap: GapRule = GapRule(),
 ) -> StepData:
     """Everything known at time ``t`` [s] for ego state ``x0`` = (X, Y, ψ, v), over the
@@ -177,7 +177,8 @@ def prepare_step(
     gives the linearisation point (``about="plan"``); ``about="reference"`` linearises about a
     rollout of the reference's controls, ``"brake"`` about full braking. ``u_prev`` [δ, a] is the
     control applied during the last step (for the ‖u_0 − u_{−1}‖² term; default the previous
-    plan's first). ``stop_rules`` = (a rule reads d_stop, a rule reads light_red/d_light): which
+    plan's first). ``stop_rules`` = (a rule reads d_stop, a rule reads light_red/d_light, a rule reads
+    xwalk_busy/d_xwalk): which
     lines the terminal can-still-stop condition guards, with ``settings.stop_decel`` [m/s²] and
     ``settings.stop_margin`` [m] before the line; ``settings.band``: bound the lateral offset to
     the drivable band; ``gap``: the gap the right-of-way rule asks for (the give-way line,
@@ -241,7 +242,7 @@ def prepare_step(
     term = TerminalStop()
     s_line = math.inf
     if any(stop_rules):
-        s_line = float(stop_lines(hc, stop=stop_rules[0], light=stop_rules[1])[-1])
+        s_line = float(stop_lines(hc, stop=stop_rules[0], light=stop_rules[1], xwalk=stop_rules[2])[-1])
     zones = ref.zones
     s_line = min(s_line, give_way_line(zones))
     if route.v_des.size and route.v_des[-1] <= 1e-9:  # the route stops at its goal

@@ -29,7 +29,7 @@ Signals of the trace (past samples from ``history``, then now, then k = 1..H: th
 fine part, in steps of dt): constants for what is known at solve time,
 :class:`~twolevel.compiler.signals.AffineSignal` for v, X, Y, ψ, δ, a, the route progress
 s_k ≈ s̄_k + t̄_kᵀ(p_k − p̄_k), the lateral offset e_k ≈ n̄_kᵀ(p_k − p̄_k), d_stop,k = s_stop − s_k,
-d_light,k = s_light − s_k, d_lead,k = s_lead,k − s_k − offset and
+d_light,k = s_light − s_k, d_xwalk,k = s_xwalk − s_k, d_lead,k = s_lead,k − s_k − offset and
 rss_gap,k = s_ahead,k − s_k − offset − (c0_k + c1_k·v_k), the chord of RSS's distance over the
 speeds step k can reach (above it: conservative).
 
@@ -174,11 +174,13 @@ def trace_signals(step: StepData, lay: Layout, n: int, past: Mapping[str, np.nda
             out[name] = _affine(xy, t_hat, s_off, hist("s", s_now), n)
         elif name == "e":
             out[name] = _affine(xy, n_hat, e_off, hist("e", e_now), n)
-        elif name in ("d_stop", "d_light", "d_lead"):
+        elif name in ("d_stop", "d_light", "d_xwalk", "d_lead"):
             if name == "d_stop":
                 tgt, extra = np.full(H + 1, hc.s_stop), 0.0
             elif name == "d_light":
                 tgt, extra = np.full(H + 1, hc.s_light), 0.0
+            elif name == "d_xwalk":
+                tgt, extra = np.full(H + 1, hc.s_xwalk), 0.0
             else:
                 tgt, extra = hc.s_lead[f], hc.lead_offset
             if not np.all(np.isfinite(tgt)):
@@ -197,8 +199,9 @@ def trace_signals(step: StepData, lay: Layout, n: int, past: Mapping[str, np.nda
                 out[name] = _affine(cols, coefs, off, hist(name, rss.gap0), n)
         elif name == "v_max":
             out[name] = np.concatenate([hist(name, float(hc.v_max[0]))[:-1], hc.v_max[f]])
-        elif name == "light_red":
-            out[name] = np.concatenate([hist(name, float(hc.light_red[0]))[:-1], hc.light_red[f]])
+        elif name in ("light_red", "xwalk_busy"):
+            c = getattr(hc, name)
+            out[name] = np.concatenate([hist(name, float(c[0]))[:-1], c[f]])
         elif name == "v_lead":
             v_lead = float(hc.v[hc.lead]) if hc.lead >= 0 else np.nan
             if hc.lead < 0:

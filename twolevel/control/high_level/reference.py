@@ -134,11 +134,12 @@ def _reference_to(route: Route, s0: float, v0: float, steps: Sequence[float], s_
 
 def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, settings: MPCSettings,
               params: BicycleParams, *, memory: StopMemory | None = None, s_hint: float | None = None,
-              stop_rules: tuple[bool, bool] = (False, False), passing: Pass | None = None,
+              stop_rules: tuple[bool, bool, bool] = (False, False, False), passing: Pass | None = None,
               gap: GapRule | None = None) -> Reference:
     """The reference at time ``t`` [s] for ego state ``x0`` = (X, Y, ψ, v) over the look-ahead of
     ``settings``: the ego is projected near ``s_hint`` [m] when given (else onto the whole
-    route); ``stop_rules`` = (a rule reads d_stop, a rule reads light_red/d_light) says which
+    route); ``stop_rules`` = (a rule reads d_stop, a rule reads light_red/d_light, a rule reads
+    xwalk_busy/d_xwalk) says which
     lines the reference stops before (at ``settings.stop_decel``, ``settings.stop_margin``
     before the line); with ``gap`` (the right-of-way rule's, None: not guarded) it stops before
     the give-way line as well, while that holds (a reference that runs on past it pulls the plan
@@ -175,7 +176,7 @@ def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, set
     zones = zone_constants(world, hc, s0, settings.H, traffic, float(x0[3]), gap) if gap is not None else None
     halts = [give_way_line(zones)]
     if any(stop_rules):
-        lines = stop_lines(hc, stop=stop_rules[0], light=stop_rules[1])
+        lines = stop_lines(hc, stop=stop_rules[0], light=stop_rules[1], xwalk=stop_rules[2])
         halts.append(float(min(lines[0], lines[-1])))
     for s_halt in halts:
         if s0 + d_brake <= s_halt + 1e-6:

@@ -28,7 +28,8 @@ that can be written smoothly become constraints, chosen from what the rule sets 
   at the end of the horizon, and the next step is infeasible; the terminal braking-distance
   term keeps it feasible from step to step. (The term at every step instead makes the rows
   nearly dependent and IPOPT crawls: 200 iterations instead of 12, measured.)
-* a rule reading ``light_red`` or ``d_light``: the same at every step k where the light is red.
+* a rule reading ``light_red`` or ``d_light``: the same at every step k where the light is red;
+  a rule reading ``xwalk_busy`` or ``d_xwalk``: the same while the crosswalk ahead is busy.
 * a rule reading the right-of-way signals (``d_zone``, ``t_reach(o)``, …): the same at the
   high level's give-way line (:func:`~twolevel.control.high_level.right_of_way.give_way_line`)
   while it holds — the baseline waits before a conflict area, it does not encode the gap rule —
@@ -153,7 +154,7 @@ class NmpcController:
             {k: v for k, v in world.ego.vehicle.items() if k in VehicleParams.__dataclass_fields__})
         self.options = options or NmpcOptions()
         self.diagnostics: list[Diagnostic] = []
-        self.speed = self.stop = self.light = self.give_way = False
+        self.speed = self.stop = self.light = self.xwalk = self.give_way = False
         self.d_collision: float | None = None
         self.gap = gap_rule(rulesets)
         for rs in rulesets:
@@ -167,6 +168,8 @@ class NmpcController:
                     self.stop = used = True
                 if reads & {"light_red", "d_light"}:
                     self.light = used = True
+                if reads & {"xwalk_busy", "d_xwalk"}:
+                    self.xwalk = used = True
                 if reads & ({"d_zone", "d_zone_out"} | MPC_ZONE_PATTERNS):
                     self.give_way = used = True
                 for c in _calls(f, "collision_free"):
@@ -176,9 +179,10 @@ class NmpcController:
                         used = True
                 if not used:
                     self.diagnostics.append(MIL530(
-                        f"rule '{r.name}' is not a speed limit, stop line, red light or collision_free rule; "
+                        f"rule '{r.name}' is not a speed limit, stop line, red light, crosswalk or collision_free rule; "
                         "the NMPC baseline ignores it", r.span or Span(rs.file),
-                        hint="the NMPC expresses v_max, d_stop, light_red/d_light, the give-way line and collision_free(d) only"))
+                        hint="the NMPC expresses v_max, d_stop, light_red/d_light, xwalk_busy/d_xwalk, the give-way line and "
+                        "collision_free(d) only"))
         st = self.settings
         o = self.options
         self.problem = NmpcProblem(model, H=st.H, dt=st.dt, weights=st.weights, bicycle=self.params,
@@ -282,7 +286,7 @@ class NmpcController:
         H = self.settings.H
         route = self.world.route
         # stop lines: the nearest line that applies at step k (inf: none)
-        s_line = stop_lines(step.hc, stop=self.stop, light=self.light)[1:]  # the high level's definition
+        s_line = stop_lines(step.hc, stop=self.stop, light=self.light, xwalk=self.xwalk)[1:]  # the high level's
         if self.give_way:  # right of way: wait where the high level's give-way line is, while it holds
             s_line = np.minimum(s_line, give_way_line(step.zones))
         if route.v_des.size and route.v_des[-1] <= 1e-9:  # the route stops at its goal
