@@ -40,7 +40,9 @@ SCENARIOS = ("traffic_rules", "safety", "scalability", "comparison")
 RIGHT_OF_WAY = ("yield_priority_road", "left_turn_stream", "four_way_stop_crossing", "blocked_exit", "right_turn_stream",
                 "merge_cyclist")
 """The right-of-way scenarios (scenarios/traffic/), part of the suite."""
-SUITE = tuple(sorted(p.stem for p in (ROOT / "scenarios" / "everyday").glob("*.yaml"))) + RIGHT_OF_WAY
+CROSSWALKS = ("zebra", "zebra_walking", "crosswalk")
+"""The crosswalk scenarios (scenarios/traffic/, rules/crosswalk.stl), part of the suite."""
+SUITE = tuple(sorted(p.stem for p in (ROOT / "scenarios" / "everyday").glob("*.yaml"))) + RIGHT_OF_WAY + CROSSWALKS
 #: Before the safety layer (main at fb74f82, the MPC and the NMPC with the paper's low level):
 #: goal time [s] of a route that stops at its goal, else the route position [m] at the end.
 BEFORE: dict[tuple[str, str], tuple[str, float]] = {
@@ -73,7 +75,7 @@ def _load() -> str:
 def _path(name: str) -> Path:
     if name.endswith(".yaml"):  # a scenario file given by its path
         return Path(name).resolve()
-    if name in RIGHT_OF_WAY:
+    if name in RIGHT_OF_WAY + CROSSWALKS:
         return ROOT / "scenarios" / "traffic" / f"{name}.yaml"
     return ROOT / "scenarios" / (f"{name}.yaml" if name in SCENARIOS else f"everyday/{name}.yaml")
 
