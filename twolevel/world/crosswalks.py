@@ -75,17 +75,17 @@ class RouteCrosswalks:
 
 
 def route_crosswalks(world: object) -> RouteCrosswalks:
-    """The crosswalks on ``world``'s route (a :class:`~twolevel.world.world.World`), in order of
-    their route position."""
-    walks = world.parts.walks  # type: ignore[attr-defined]
+    """The crosswalks on ``world``'s route (a :class:`~twolevel.world.world.World`, which builds
+    them: not imported here), in order of their route position."""
+    walks, route, L = world.parts.walks, world.route, world.ego.length  # type: ignore[attr-defined]
     rows = np.flatnonzero(walks.crosswalk[walks.row_owner]) if len(walks.row_owner) else np.zeros(0, int)
-    s = world.route.from_lane(walks.row_lane[rows], walks.row_s[rows])  # type: ignore[attr-defined]
+    s = route.from_lane(walks.row_lane[rows], walks.row_s[rows])
     rows, s = rows[~np.isnan(s)], s[~np.isnan(s)]
     order = np.argsort(s, kind="stable")
     rows, s = rows[order], s[order]
     owner = walks.row_owner[rows]
     h = walks.heading[owner]
-    return RouteCrosswalks(owner, s, s - STOP_SHORT - world.ego.length / 2,  # type: ignore[attr-defined]
+    return RouteCrosswalks(owner, s, s - STOP_SHORT - L / 2,
                            walks.row_enter[rows], walks.row_leave[rows], walks.origin[owner].reshape(-1, 2),
                            np.stack([np.cos(h), np.sin(h)], axis=-1).reshape(-1, 2))
 
@@ -95,14 +95,12 @@ def positions_of(cw: RouteCrosswalks, index: np.ndarray, x: np.ndarray, y: np.nd
     """Each crosswalk's pedestrian among participants ``index`` (n,) whose positions ``x``, ``y``
     and presence ``present`` are (..., n): its position (..., C, 2) [m] and presence (..., C)
     (absent where it is not among them)."""
-    lead = x.shape[:-1]
-    j = np.array([int(np.flatnonzero(index == o)[0]) if np.any(index == o) else -1 for o in cw.owner], dtype=int)
-    have = j >= 0
-    jj = np.maximum(j, 0)
     if x.shape[-1] == 0:
+        lead = x.shape[:-1]
         return np.zeros(lead + (cw.n, 2)), np.zeros(lead + (cw.n,), dtype=bool)
-    xy = np.stack([x[..., jj], y[..., jj]], axis=-1)
-    return xy, present[..., jj] & have
+    match = cw.owner[:, None] == np.asarray(index)[None, :]  # (C, n)
+    j = match.argmax(axis=1)
+    return np.stack([x[..., j], y[..., j]], axis=-1), present[..., j] & match.any(axis=1)
 
 
 def crosswalk_signals(cw: RouteCrosswalks, s: np.ndarray, v: np.ndarray, xy: np.ndarray, present: np.ndarray, *,
@@ -128,4 +126,3 @@ def crosswalk_signals(cw: RouteCrosswalks, s: np.ndarray, v: np.ndarray, xy: np.
     d_busy = np.where(busy, d, np.inf).min(axis=-1)
     d_near = np.where(applies, d, np.inf).min(axis=-1)
     return any_busy.astype(float), np.where(any_busy, d_busy, d_near)
-
