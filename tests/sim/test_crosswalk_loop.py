@@ -89,6 +89,27 @@ def test_nmpc_stops_for_a_pedestrian_waiting_at_the_zebra(tmp_path: Path) -> Non
     _check_yielded(cols, states, w, stood=True)
 
 
+@pytest.mark.slow
+def test_a_pedestrian_seen_too_late_to_stop_comfortably_is_passed(tmp_path: Path) -> None:
+    """The dilemma: with r_near 20 m the waiting pedestrian comes into sight 16 m before the line
+    at 13.9 m/s (stopping would take 6 m/s²); the crosswalk is never busy, the ego passes at speed
+    without braking, the pedestrian (who waits for a 2 s gap) crosses after it, nobody is hit."""
+    path = tmp_path / "late.yaml"
+    path.write_text(f"kind: scenario\nname: zebra_late\nextends: {ROOT / 'scenarios' / 'traffic' / 'zebra.yaml'}\n"
+                    "controller: {r_near: 20}\n")
+    summary, diags = simulate_scenario(str(path), str(tmp_path / "late"), frames=False, ttr_every=0)
+    assert summary is not None and summary.status == "complete", [d.message for d in diags]
+    verdict, _ = judge_run(summary.run_dir, str(path))
+    assert verdict.passed, [c.detail for c in verdict.failed]  # goal, no collision, the rule holds
+    cols = read_run(summary.run_dir).columns
+    assert (cols["xwalk_busy"] == 0).all() and np.isfinite(cols["d_xwalk"]).any()
+    w = load_world(path)
+    passing = int(np.argmax(cols["x"] + w.ego.length / 2 > X_CROSS))
+    assert cols["v"][: passing + 1].min() > 13.0  # no braking for it
+    states, _ = replay(w, Path(summary.run_dir) / "trace.csv")
+    assert states[passing].memory.phase[0] <= 1 and max(st.memory.phase[0] for st in states[1:]) == 3
+
+
 def test_check_accepts_the_rule_and_names_a_typo(tmp_path: Path) -> None:
     runner = CliRunner()
     res = runner.invoke(app, ["check", str(RULE), "--dt", "0.1", "--horizon", "10", "-f", "concise"],
