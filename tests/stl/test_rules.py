@@ -13,7 +13,7 @@ from twolevel.stl.parser import parse
 from twolevel.stl.printer import format_file
 
 RULES = sorted((Path(__file__).resolve().parents[2] / "rules").glob("*.stl"))
-WORLD = frozenset("x y psi v a delta s e v_max d_stop light_red d_light d_lead v_lead rss_gap d_zone d_zone_out over_centre solid_left no_overtaking".split())
+WORLD = frozenset("x y psi v a delta s e v_max d_stop light_red d_light d_lead v_lead rss_gap d_zone d_zone_out over_centre solid_left no_overtaking xwalk_busy d_xwalk".split())
 
 
 def test_library_is_there() -> None:

@@ -153,3 +153,14 @@ def test_runs_record_the_crosswalk_signals_only_when_a_rule_reads_them() -> None
     assert not set(ON_DEMAND_SIGNALS) & set(SIGNALS)  # not among the columns every run records
     other = load_world(ROOT / "scenarios" / "traffic" / "cut_in.yaml")
     assert other.on_demand_signals == () and not set(ON_DEMAND_SIGNALS) & set(ExtraColumns(other).columns)
+
+
+def test_the_low_levels_history_is_not_cut_by_on_demand_signals_a_run_does_not_record() -> None:
+    """Regression: the low level's judge took the shortest history over every provided signal,
+    the on-demand ones included, which a run without a rule reading them never records: no past
+    at all, and return_after_passing (15 s of past) failed on overtake_stalled's pass."""
+    from twolevel.control.low_level.judge import history_length
+
+    recorded = {n: np.zeros(20) for n in SIGNALS}
+    assert history_length(recorded, 15) == 15
+    assert history_length(recorded | {"xwalk_busy": np.zeros(5)}, 15) == 5

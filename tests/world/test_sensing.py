@@ -52,7 +52,7 @@ def test_batched_prediction_equals_signals_along() -> None:
         ref = signals_along(w, log, {"x": pts[k, :, 0], "y": pts[k, :, 1], "psi": psi[k], "v": v[k]}, t0=t0)
         for name in SIGNALS:
             np.testing.assert_allclose(got[name][k], ref[name], rtol=0, atol=1e-6, err_msg=f"{name} row {k}")
-    assert set(got) == PROVIDED_SIGNALS
+    assert set(got) == set(SIGNALS)  # the on-demand signals only where a rule reads them (none here)
     assert np.isfinite(got["d_stop"]).any() and np.isfinite(got["d_lead"]).any()
 
 

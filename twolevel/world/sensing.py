@@ -179,8 +179,9 @@ def min_box_gap(x: np.ndarray, y: np.ndarray, psi: np.ndarray, length: float, wi
 def sense(world: World, t0: float, dt: float, memory: Memory, others: Others, x: np.ndarray, y: np.ndarray,
           psi: np.ndarray, v: np.ndarray, a: np.ndarray, delta: np.ndarray, *, s_center: np.ndarray | None = None,
           half_window: float = 10.0) -> dict[str, np.ndarray]:
-    """Every provided signal (K, T) along K ego trajectories sampled every ``dt`` [s] from ``t0``
-    [s]: poses x, y [m], psi [rad], speed v [m/s] and inputs a [m/s²], delta [rad], each (K, T);
+    """Every provided signal (K, T) (of the on-demand ones, those the scenario's rules read:
+    :attr:`~twolevel.world.world.World.on_demand_signals`) along K ego trajectories sampled every
+    ``dt`` [s] from ``t0`` [s]: poses x, y [m], psi [rad], speed v [m/s] and inputs a [m/s²], delta [rad], each (K, T);
     and, when the scenario's rules quantify over participants, the participant signals they read
     of each of ``others`` (``name[ID]``, :func:`twolevel.world.signals.participant_signals_along`).
     ``memory`` is the state of the past *before* sample 0; ``others`` the other vehicles at the
@@ -201,7 +202,9 @@ def sense(world: World, t0: float, dt: float, memory: Memory, others: Others, x:
     out.update(_lead_and_gap(world, others, x, y, psi, s, e, v))
     out.update(zone_signals(world, s, v))
     out.update(overtaking_signals(world.lanes, route, s, e, world.ego.width))
-    out["xwalk_busy"], out["d_xwalk"] = _crosswalks(world, others, x, y, s, v)
+    if world.on_demand_signals:  # only those a rule reads: a run records (and keeps a history of) only these
+        busy, d = _crosswalks(world, others, x, y, s, v)
+        out.update({n: a for n, a in (("xwalk_busy", busy), ("d_xwalk", d)) if n in world.on_demand_signals})
     if world.participant_signals and others.n:
         out.update(_participants(world, others, x, y, psi, s, e, dt, t0))
     return out

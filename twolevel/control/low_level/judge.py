@@ -31,7 +31,7 @@ import numpy as np
 from twolevel.control.low_level.rules import RuleCheck
 from twolevel.monitor.batch import evaluate_rules_batch
 from twolevel.stl import ast
-from twolevel.world.provided import PROVIDED_SIGNALS
+from twolevel.world.provided import ON_DEMAND_SIGNALS, SIGNALS
 from twolevel.world.sensing import Memory, Others, sense
 from twolevel.world.world import World
 
@@ -39,10 +39,12 @@ __all__ = ["Judge", "history_length", "extend", "cut"]
 
 
 def history_length(history: Mapping[str, np.ndarray] | None, past: int) -> int:
-    """Past samples every signal of ``history`` has, at most ``past``."""
+    """Past samples every signal of ``history`` has, at most ``past``: every signal a run records,
+    and the on-demand ones it holds (a run records those only when a rule reads them)."""
     if not history or past == 0:
         return 0
-    return min([past] + [len(np.asarray(history.get(n, ()))) for n in PROVIDED_SIGNALS])
+    names = SIGNALS + tuple(n for n in ON_DEMAND_SIGNALS if n in history)
+    return min([past] + [len(np.asarray(history.get(n, ()))) for n in names])
 
 
 def extend(u: np.ndarray) -> np.ndarray:
