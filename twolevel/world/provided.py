@@ -41,8 +41,9 @@ d_xwalk       m      route distance to the line before that crosswalk (where the
 ============  =====  ===============================================================
 
 ``xwalk_busy`` and ``d_xwalk`` (:mod:`twolevel.world.crosswalks`) are *on demand*
-(:data:`ON_DEMAND_SIGNALS`): always sensed, but recorded in a run's trace and history only when a
-loaded rule reads them (so a run without such a rule keeps its columns).
+(:data:`ON_DEMAND_SIGNALS`): the reference definition (``signals_along``) always gives them, but
+a run senses them and records them in its trace and history only when a loaded rule reads them
+(so a run without such a rule keeps its columns and its cost).
 
 **Participant signals** relate one other participant o to the ego; a rule reads them inside a
 quantifier (``forall o in vehicles: d_lon(o) > 0``). Both are projected on the ego's route: route
