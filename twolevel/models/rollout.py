@@ -7,9 +7,15 @@ sequences over H steps at once and returns their states and oriented bounding bo
 
 Backends (same equations, :mod:`twolevel.models.fourwheel`, agree to 1e-12):
 
-- ``"casadi"``: one internal step as a casadi SX function, compiled to machine code with the
-  system C compiler (casadi's code generator, gcc -O2 in a subprocess) once per parameter set and
-  step length, then ``mapaccum`` over the substeps and the horizon and ``map`` over the K candidates. Without a
+- ``"casadi"``: one control step (its internal steps, the commands held) as a casadi function,
+  compiled to machine code with the system C compiler (casadi's code generator, gcc -O2 in a
+  subprocess) once per parameter set and step length, then ``mapaccum`` over the horizon and
+  ``map`` over the K candidates, called through a casadi buffer on the arrays' memory (no
+  conversion to casadi matrices). The loop over the internal steps runs in the compiled code, not
+  in casadi's virtual machine: the same arithmetic in the same order, so the states are those of
+  compiling one internal step and letting casadi call it per substep, bit for bit
+  (``-ffp-contract=off``: no fused multiply-adds on any platform), at about half the time for the
+  few-candidate, short-horizon rollouts of the fail-safes (``benchmarks/rollout.py``). Without a
   working compiler it falls back to casadi's SX virtual machine (≈ 3× slower).
 - ``"numpy"``: the substep vectorised over K, looping over H × substeps in Python.
 
@@ -95,7 +101,7 @@ def _compiled(fn: Any) -> Any:
         gen = ca.CodeGenerator(stem + ".c")
         gen.add(fn)
         gen.generate(build + os.sep)
-        subprocess.run(["gcc", "-O2", "-fPIC", "-shared", c_file, "-o", so_file, "-lm"], check=True,
+        subprocess.run(["gcc", "-O2", "-ffp-contract=off", "-fPIC", "-shared", c_file, "-o", so_file, "-lm"], check=True,
                        capture_output=True, start_new_session=True, timeout=600)
         return ca.external(fn.name(), so_file)
     finally:
@@ -126,19 +132,45 @@ def compiled_available() -> bool:
         return False
 
 
-@functools.lru_cache(maxsize=128)  # the fail-safes roll the manoeuvres still moving: K varies
-def _batch_function(p: VehicleParams, dt: float, H: int, K: int, accel: bool, jit: bool) -> Any:
-    """casadi Function (x0 (12×K), U (2×HK)) → states (12×HK), columns k-major per candidate."""
+def _substeps(sub: Any, n: int, x: Any, delta: Any, gamma: Any) -> Any:
+    """The state (MX) after ``n`` calls of the substep function ``sub`` from ``x``, the commands held."""
+    import casadi as ca
+
+    ones = ca.DM.ones(1, n)
+    return sub.mapaccum("substeps", n)(x, delta @ ones, gamma @ ones)[:, -1]
+
+
+@functools.lru_cache(maxsize=8)
+def _step_function(p: VehicleParams, dt: float, jit: bool) -> Any:
+    """casadi Function (x (12), δ, γ) → x after one control step ``dt`` [s], i.e. its internal
+    steps with the commands held; compiled as one C function (the loop over the internal steps
+    inside it) if jit."""
     import casadi as ca
 
     n = fw.substeps_per_step(dt, p)
-    sub = _substep_function(p, dt / n, jit)
+    x, delta, gamma = ca.MX.sym("x", fw.NX), ca.MX.sym("delta"), ca.MX.sym("gamma")
+    x_next = _substeps(_substep_function(p, dt / n, False), n, x, delta, gamma)
+    f = ca.Function("fourwheel_step", [x, delta, gamma], [x_next])
+    return _compiled(f) if jit else f
+
+
+@functools.lru_cache(maxsize=128)  # the fail-safes roll the manoeuvres still moving: K varies
+def _batch_function(p: VehicleParams, dt: float, H: int, K: int, accel: bool, jit: bool, fused: bool = True) -> Any:
+    """casadi Function (x0 (12×K), U (2×HK)) → states (12×HK), columns k-major per candidate.
+    ``fused``: each control step is one call of :func:`_step_function`; else (the reference the
+    benchmark and the tests compare with) casadi's virtual machine calls the one-substep function
+    (compiled if jit) for every internal step."""
+    import casadi as ca
+
     x = ca.MX.sym("x", fw.NX)
     u = ca.MX.sym("u", 2)
     gamma = gamma_from_accel(u[1], x[3], p, casadi_ops()) if accel else u[1]
-    ones = ca.DM.ones(1, n)
-    xs = sub.mapaccum("substeps", n)(x, u[0] @ ones, gamma @ ones)
-    step = ca.Function("fourwheel_step", [x, u], [xs[:, -1]])
+    if fused:
+        x_next = _step_function(p, dt, jit)(x, u[0], gamma)
+    else:
+        n = fw.substeps_per_step(dt, p)
+        x_next = _substeps(_substep_function(p, dt / n, jit), n, x, u[0], gamma)
+    step = ca.Function("fourwheel_step", [x, u], [x_next])
     horizon = step.mapaccum("horizon", H)
     return horizon.map(K) if K > 1 else horizon
 
@@ -156,14 +188,15 @@ def _prepare(x0: ArrayLike, controls: ArrayLike) -> tuple[NDArray[np.float64], N
 
 
 def _simulate(x0: ArrayLike, controls: ArrayLike, dt: float, p: VehicleParams, backend: Backend,
-              accel: bool) -> Rollout:
+              accel: bool, fused: bool = True) -> Rollout:
     x, u = _prepare(x0, controls)
     K, H, _ = u.shape
     if backend == "numpy":
         states = _simulate_numpy(x, u, dt, p, accel)
+    elif backend != "casadi-vm" and backend in ("auto", "casadi") and compiled_available():
+        states = _simulate_buffered(_batch_function(p, float(dt), H, K, accel, True, fused), x, u)
     elif backend in ("auto", "casadi", "casadi-vm"):
-        jit = backend != "casadi-vm" and compiled_available()
-        f = _batch_function(p, float(dt), H, K, accel, jit)
+        f = _batch_function(p, float(dt), H, K, accel, False, fused)
         res = f(x.T, u.reshape(K * H, 2).T)
         if not hasattr(res, "full"):  # symbolic: casadi's overload dispatch swallowed a signal raised in
             from twolevel import interruption  # the numeric call and tried the symbolic overloads
@@ -175,6 +208,27 @@ def _simulate(x0: ArrayLike, controls: ArrayLike, dt: float, p: VehicleParams, b
     else:
         raise ValueError(f"unknown backend {backend!r}")
     return Rollout(states, p.length, p.width)
+
+
+def _simulate_buffered(f: Any, x: NDArray[np.float64], u: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The states (K, H+1, 12) of the batch function ``f`` (:func:`_batch_function`'s) from ``x``
+    (K, 12) under ``u`` (K, H, 2), called through a casadi buffer on the arrays' memory: a (K, 12)
+    array in C order is the 12×K matrix in casadi's column-major order, and so on (no casadi
+    matrices built, no symbolic overloads tried: a signal is raised by Python once the call
+    returns)."""
+    K, H, _ = u.shape
+    xin = np.ascontiguousarray(x)
+    uin = np.ascontiguousarray(u.reshape(K * H, 2))
+    states = np.empty((K, H + 1, fw.NX))
+    states[:, 0] = x
+    out = np.empty((K * H, fw.NX))
+    buf, call = f.buffer()
+    buf.set_arg(0, memoryview(xin))
+    buf.set_arg(1, memoryview(uin))
+    buf.set_res(0, memoryview(out))
+    call()
+    states[:, 1:] = out.reshape(K, H, fw.NX)
+    return states
 
 
 def _simulate_numpy(x: NDArray[np.float64], u: NDArray[np.float64], dt: float, p: VehicleParams,
