@@ -162,3 +162,27 @@ def test_the_return_path_on_a_grid_at_once_is_column_by_column_the_same(rows, s)
         alone = return_path(e_from, path, grid[:, j])
         for t, o in zip(together, alone):
             assert np.array_equal(t[:, j], o)
+
+
+@settings(max_examples=25, deadline=None)
+@given(v0=st.floats(0.0, 25.0), lateral=st.floats(-0.5, 3.5), s_past=st.floats(5.0, 80.0), v_past=st.floats(0.0, 8.0),
+       pick=st.lists(st.integers(0, 9), min_size=1, max_size=4, unique=True))
+def test_a_batch_of_fail_safes_is_its_controls_replayed_from_the_start(v0, lateral, s_past, v_past, pick):
+    """Whatever the batch (braking levels, clearing, returning to the lane, completing a pass, rolled
+    together in segments planned from each segment's start), each fail-safe's commands replayed in
+    one rollout from its start give its states bit for bit, and the segments' planning bounds the
+    steering."""
+    w = world("stalled")
+    p = ego_params(w)
+    s0 = 10.0
+    x0 = ego_on(w, "road", s0, v0, lateral)
+    st_ = FailSafeSettings()
+    back = manoeuvres(st_, np.array([[30.0, 40.0]]), s0, v0, brake_rate(p), (0.0, s0 + s_past, 3.5, v_past, lateral))
+    ahead = manoeuvres(st_, np.array([[30.0, 40.0]]), s0, v0, brake_rate(p))
+    pool = back + ahead
+    plan = [pool[i % len(pool)] for i in pick]
+    for fs in roll(x0, plan, w.route, s0, w.settings.dt, p):
+        assert np.all(np.abs(fs.controls[:, 0]) <= st_.delta_max) and np.all(np.abs(fs.controls[:, 1]) <= 1.0)
+        if fs.steps:
+            replay = rollout(fs.states[0], fs.controls[None], w.settings.dt, p).states[0]
+            assert np.array_equal(replay, fs.states)

@@ -355,7 +355,7 @@ def roll(x0: np.ndarray, plan: list[Manoeuvre], route: Route, s0: float, dt: flo
     path_end = path[4] + path[5]
     path_rows = tuple(p[:, None] for p in path)
     has_clear = ~np.isnan(clear_a)
-    ca = np.nan_to_num(clear_a)
+    ca = np.where(has_clear, clear_a, 0.0)  # np.nan_to_num's, without its wrapper
     ca_col, decel_col, full_col = ca[:, None], decel[:, None], is_full[:, None]
     s_last = float(route.s[-1])
     e_from: np.ndarray | None = None
@@ -367,56 +367,66 @@ def roll(x0: np.ndarray, plan: list[Manoeuvre], route: Route, s0: float, dt: flo
     s_hint = np.array(np.broadcast_to(np.asarray(s0, dtype=float), (K,)))
     stop_at = np.full(K, -1)
     done = 0
-    while done < n_max and (stop_at < 0).any():
-        v = np.maximum(x[:, 3], 0.0)
-        s, e = route.project_near(x[:, :2], s_hint, 5.0 + float(v.max()) * dt)
-        e_psi = _wrap(x[:, 2] - route.heading_at(s))
-        if e_from is None:
-            e_from = e.copy()[:, None]
-            steps = _path_steps(e_from, path_rows)
-        # the profile: clear (hold clear_a until s_clear), then brake at decel to standstill
-        clearing = has_clear & (s < s_clear)
-        with np.errstate(divide="ignore", invalid="ignore"):
+    along: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # per segment length: its times [s] and Stanley's fade
+    # a segment's planning is a few hundred operations on (K, n) arrays of a handful of rows, so each
+    # is written as the cheapest numpy call that gives the same bits (np.minimum(np.maximum) for
+    # np.clip, one errstate for the whole loop, the times and fade of a segment length computed once)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        while done < n_max and (stop_at < 0).any():
+            v = np.maximum(x[:, 3], 0.0)
+            s, e = route.project_near(x[:, :2], s_hint, 5.0 + float(v.max()) * dt)
+            e_psi = _wrap(x[:, 2] - route.heading_at(s))
+            if e_from is None:
+                e_from = e.copy()[:, None]
+                steps = _path_steps(e_from, path_rows)
+            # the profile: clear (hold clear_a until s_clear), then brake at decel to standstill
+            clearing = has_clear & (s < s_clear)
             t_c = np.where(clearing, np.where(np.abs(ca) > 1e-9,
                                               (-v + np.sqrt(np.maximum(v**2 + 2 * ca * (s_clear - s), 0.0))) / ca,
                                               (s_clear - s) / np.maximum(v, 1e-3)), 0.0)
-        t_c = np.minimum(np.nan_to_num(t_c, nan=st.max_time, posinf=st.max_time), st.max_time)
-        v_c = v + ca * t_c * clearing
-        need = t_c + v_c / decel + 2 * dt
-        n = int(min(n_max - done, bucket * math.ceil(float(need[stop_at < 0].max()) / (bucket * dt) + 1e-9)))
-        n = max(n, 1)
-        if (returning & (stop_at < 0) & (s < path_end)).any():  # on a path: closed loop twice a second
-            n = min(n, max(1, bucket // 2))
-        tk = dt * np.arange(n)[None, :]
-        in_clear = clearing[:, None] & (tk < t_c[:, None])
-        tb = np.maximum(tk - t_c[:, None], 0.0)
-        v_pred = np.where(in_clear, v[:, None] + ca_col * tk, np.maximum(v_c[:, None] - decel_col * tb, 0.0))
-        s_c = s + v * t_c + 0.5 * ca * clearing * t_c**2
-        tb_stop = np.minimum(tb, v_c[:, None] / decel_col)
-        s_pred = np.where(in_clear, s[:, None] + v[:, None] * tk + 0.5 * ca_col * tk**2,
-                          s_c[:, None] + v_c[:, None] * tb_stop - 0.5 * decel_col * tb_stop**2)
-        a_k = np.where(in_clear, ca_col, -decel_col)
-        gamma = np.where(full_col & ~in_clear, -1.0, gamma_from_accel(a_k, v_pred, params))
-        # steering: curvature along the profile + Stanley's correction, faded out over a second;
-        # the lateral path at the start (column 0: the errors) and along the profile (its curvature) at once
-        e_path, slope, path_curv = _path_at(e_from, steps, np.concatenate([s[:, None], s_pred], axis=1))
-        e_path, slope, path_curv = e_path[:, 0], slope[:, 0], path_curv[:, 1:]
-        ff = np.arctan(L * (route.curvature_at(np.minimum(s_pred, s_last)) + path_curv))
-        fade = np.clip(1.0 - tk / 1.0, 0.0, 1.0)
-        fb = -(st.k_heading * (e_psi - np.arctan(slope)) + np.arctan2(st.k_lateral * (e - e_path), v + 1.0))
-        bound = np.minimum(st.delta_max, np.arctan(st.a_lat_max * L / np.maximum(v_pred**2, 1e-6)))
-        delta = np.clip(ff + fb[:, None] * fade, -bound, bound)
-        u = np.stack([delta, gamma], axis=-1)  # (K, n, 2)
-        ro = _roll_live(x, u, stop_at < 0, dt, params, backend)  # (K, n+1, 12)
-        controls.append(u)
-        states.append(ro[:, 1:])
-        stopped = ro[:, 1:, 3] <= st.v_stop
-        first = np.where(stopped.any(axis=1), stopped.argmax(axis=1), -1)
-        new = (stop_at < 0) & (first >= 0)
-        stop_at = np.where(new, done + first + 1, stop_at)
-        x = ro[:, -1]
-        s_hint = s_pred[:, -1]
-        done += n
+            # NaN and +inf (no time to clear) → max_time; never −inf: a time to clear is ≥ 0
+            t_c = np.minimum(np.where(np.isnan(t_c), st.max_time, t_c), st.max_time)
+            v_c = v + ca * t_c * clearing
+            need = t_c + v_c / decel + 2 * dt
+            n = int(min(n_max - done, bucket * math.ceil(float(need[stop_at < 0].max()) / (bucket * dt) + 1e-9)))
+            n = max(n, 1)
+            if (returning & (stop_at < 0) & (s < path_end)).any():  # on a path: closed loop twice a second
+                n = min(n, max(1, bucket // 2))
+            if n not in along:
+                tk_n = dt * np.arange(n)[None, :]
+                along[n] = tk_n, np.minimum(np.maximum(1.0 - tk_n / 1.0, 0.0), 1.0)
+            tk, fade = along[n]
+            in_clear = clearing[:, None] & (tk < t_c[:, None])
+            tb = np.maximum(tk - t_c[:, None], 0.0)
+            v_pred = np.where(in_clear, v[:, None] + ca_col * tk, np.maximum(v_c[:, None] - decel_col * tb, 0.0))
+            s_c = s + v * t_c + 0.5 * ca * clearing * t_c**2
+            tb_stop = np.minimum(tb, v_c[:, None] / decel_col)
+            s_pred = np.where(in_clear, s[:, None] + v[:, None] * tk + 0.5 * ca_col * tk**2,
+                              s_c[:, None] + v_c[:, None] * tb_stop - 0.5 * decel_col * tb_stop**2)
+            u = np.empty((K, n, 2))  # (K, n, 2): [δ, γ]
+            held = full_col & ~in_clear
+            if held.all():  # full braking throughout: γ = −1 (the inverse map's value is not read)
+                u[..., 1] = -1.0
+            else:
+                u[..., 1] = np.where(held, -1.0, gamma_from_accel(np.where(in_clear, ca_col, -decel_col), v_pred, params))
+            # steering: curvature along the profile + Stanley's correction, faded out over a second;
+            # the lateral path at the start (column 0: the errors) and along the profile (its curvature) at once
+            e_path, slope, path_curv = _path_at(e_from, steps, np.concatenate([s[:, None], s_pred], axis=1))
+            e_path, slope, path_curv = e_path[:, 0], slope[:, 0], path_curv[:, 1:]
+            ff = np.arctan(L * (route.curvature_at(np.minimum(s_pred, s_last)) + path_curv))
+            fb = -(st.k_heading * (e_psi - np.arctan(slope)) + np.arctan2(st.k_lateral * (e - e_path), v + 1.0))
+            bound = np.minimum(st.delta_max, np.arctan(st.a_lat_max * L / np.maximum(v_pred**2, 1e-6)))
+            u[..., 0] = np.minimum(np.maximum(ff + fb[:, None] * fade, -bound), bound)
+            ro = _roll_live(x, u, stop_at < 0, dt, params, backend)  # (K, n+1, 12)
+            controls.append(u)
+            states.append(ro[:, 1:])
+            stopped = ro[:, 1:, 3] <= st.v_stop
+            first = np.where(stopped.any(axis=1), stopped.argmax(axis=1), -1)
+            new = (stop_at < 0) & (first >= 0)
+            stop_at = np.where(new, done + first + 1, stop_at)
+            x = ro[:, -1]
+            s_hint = s_pred[:, -1]
+            done += n
     U = np.concatenate(controls, axis=1)
     X = np.concatenate(states, axis=1)
     out = []
