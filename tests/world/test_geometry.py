@@ -93,3 +93,22 @@ def test_index_clamp_is_np_clip(i, lo, width):
     a = np.asarray(i) if isinstance(i, list) else np.intp(i)
     got, want = _clamp(a, lo, lo + width), np.clip(a, lo, lo + width)
     assert type(got) is type(want) and np.array_equal(got, want)
+
+
+_VALUES = st.floats(allow_nan=True, allow_infinity=True, width=64)
+
+
+@settings(max_examples=300, deadline=None)
+@given(t=st.one_of(_VALUES, st.lists(_VALUES, min_size=1, max_size=20)),
+       bounds=st.one_of(st.tuples(_VALUES, _VALUES), st.integers(1, 20).flatmap(
+           lambda n: st.tuples(st.lists(_VALUES, min_size=n, max_size=n), st.lists(_VALUES, min_size=n, max_size=n)))))
+def test_value_clamp_is_np_clip(t, bounds):
+    """The interpolations' and projections' clamp of values gives np.clip's result bit for bit,
+    with scalar or per-element bounds (±∞ for an extrapolating end), NaNs and crossed bounds."""
+    lo, hi = (np.asarray(b, dtype=float) for b in bounds)
+    a = np.asarray(t, dtype=float) if isinstance(t, list) else np.float64(t)
+    if lo.ndim and (np.ndim(a) == 0 or len(a) != len(lo)):
+        a = np.resize(np.asarray(a, dtype=float), lo.shape)
+    got, want = _clamp(a, lo, hi), np.clip(a, lo, hi)
+    assert np.shape(got) == np.shape(want)
+    assert np.array_equal(np.asarray(got).view(np.int64), np.asarray(want).view(np.int64))  # bits: ±0, NaNs

@@ -64,7 +64,7 @@ class Polyline:
         """Heading [rad] at arc length ``s`` [m] (interpolated between vertices)."""
         s = np.asarray(s, dtype=float)
         i, t = self._index(s)
-        t = np.clip(t, 0.0, 1.0)
+        t = _clamp(t, 0.0, 1.0)
         return self.heading[i] + t * (self.heading[i + 1] - self.heading[i])
 
     def curvature_at(self, s: np.ndarray | float) -> np.ndarray:
@@ -99,7 +99,7 @@ class Polyline:
             low[0] = -np.inf
         if hi == len(self.s) - 1:
             high[-1] = np.inf
-        t = np.clip(t_raw, low, high)
+        t = _clamp(t_raw, low, high)
         diff = rel - t[..., None] * d[None]
         dist2 = np.einsum("mkj,mkj->mk", diff, diff)
         dist2 = np.where(l2[None, :] > 0, dist2, np.inf)
@@ -157,7 +157,7 @@ class Lane(Polyline):
         """Width [m] at arc length ``s`` [m] (linear between vertices, constant beyond the ends)."""
         i, t = self._index(np.asarray(s, dtype=float))
         w = np.asarray(self.widths)
-        return w[i] + np.clip(t, 0.0, 1.0) * (w[i + 1] - w[i])
+        return w[i] + _clamp(t, 0.0, 1.0) * (w[i + 1] - w[i])
 
     def on_lane(self, points: np.ndarray, margin: float = 0.0) -> np.ndarray:
         """Whether points (..., 2) lie on the lane (|lateral| ≤ width(s)/2 + margin, 0 ≤ s ≤ length)."""
@@ -251,9 +251,10 @@ def concatenate(pieces: list[tuple[Polyline, float, float]]) -> Polyline:
     return Polyline(np.concatenate(pts), np.concatenate(ss), np.concatenate(hs), np.concatenate(ks))
 
 
-def _clamp(i: np.ndarray, lo: int, hi: int) -> np.ndarray:
-    """Integer indices ``i`` clipped to [lo, hi]: np.clip's result without its wrapper's overhead
-    (the projections and look-ups call it thousands of times a step)."""
+def _clamp(i: np.ndarray, lo: np.ndarray | float, hi: np.ndarray | float) -> np.ndarray:
+    """Indices or values ``i`` clipped to [lo, hi] (scalars or arrays broadcast with it): np.clip's
+    result, bit for bit, without its wrapper's overhead (the projections and look-ups call it
+    thousands of times a step; the fail-safes' segments a few hundred times per verification)."""
     return np.minimum(np.maximum(i, lo), hi)
 
 
@@ -431,7 +432,7 @@ class LaneSet:
     def _interp(self, lane: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         i, t = self._vertex(lane, s)
         p = self.points[i] + t[:, None] * (self.points[i + 1] - self.points[i])
-        h = self.heading[i] + np.clip(t, 0, 1) * (self.heading[i + 1] - self.heading[i])
+        h = self.heading[i] + _clamp(t, 0, 1) * (self.heading[i + 1] - self.heading[i])
         return p, h
 
     def pose(self, lane: np.ndarray, s: np.ndarray, lateral: np.ndarray | float = 0.0) -> tuple[np.ndarray, np.ndarray]:
@@ -446,7 +447,7 @@ class LaneSet:
         """Widths (N,) [m] of lanes at (lane index, s [m]) (constant beyond a lane's ends)."""
         lane = np.asarray(lane, dtype=int)
         i, t = self._vertex(lane, np.asarray(s, dtype=float))
-        return self.widths[i] + np.clip(t, 0.0, 1.0) * (self.widths[i + 1] - self.widths[i])
+        return self.widths[i] + _clamp(t, 0.0, 1.0) * (self.widths[i + 1] - self.widths[i])
 
     def beside(self, lane: np.ndarray, s: np.ndarray, left: np.ndarray | bool) -> tuple[np.ndarray, np.ndarray]:
         """The lane adjacent to ``lane`` on its left (``left`` true) or right, level with ``s`` [m],
@@ -455,7 +456,7 @@ class LaneSet:
         i, t = self._vertex(lane, s)
         table = np.where(left, self.beside_left[i], self.beside_right[i])
         nxt = np.where(left, self.beside_left[i + 1], self.beside_right[i + 1])
-        t = np.clip(t, 0.0, 1.0)
+        t = _clamp(t, 0.0, 1.0)
         both = ~np.isnan(table) & ~np.isnan(nxt)  # else the nearer end's value, if it has one
         out = np.where(both, table + t * (np.where(both, nxt, 0.0) - np.where(both, table, 0.0)),
                        np.where(t < 0.5, table, nxt))
@@ -485,7 +486,7 @@ class LaneSet:
             l2 = np.einsum("kj,kj->k", d, d)
             rel = pts[rep] - a
             t = np.einsum("kj,kj->k", rel, d) / np.where(l2 > 0, l2, 1.0)
-            t = np.clip(t, np.where(within == 0, -np.inf, 0.0), np.where(within == np.repeat(cnt, cnt) - 1, np.inf, 1.0))
+            t = _clamp(t, np.where(within == 0, -np.inf, 0.0), np.where(within == np.repeat(cnt, cnt) - 1, np.inf, 1.0))
             diff = rel - t[:, None] * d
             dist2 = np.where(l2 > 0, np.einsum("kj,kj->k", diff, diff), np.inf)
             first = _first_min(dist2, cnt)
@@ -509,7 +510,7 @@ class LaneSet:
         d = self.points[1:] - a
         l2 = np.einsum("kj,kj->k", d, d)
         rel = pts[:, None, :] - a[None]
-        t = np.clip(np.einsum("mkj,kj->mk", rel, d) / np.where(l2 > 0, l2, 1.0), 0, 1)
+        t = _clamp(np.einsum("mkj,kj->mk", rel, d) / np.where(l2 > 0, l2, 1.0), 0, 1)
         diff = rel - t[..., None] * d[None]
         dist2 = np.einsum("mkj,mkj->mk", diff, diff)
         bad = (self.seg_lane < 0) | (l2 <= 0)
@@ -691,7 +692,7 @@ class Route(Polyline):
         l2 = np.einsum("mj,mj->m", d, d)
         rel = pts[m] - a
         t_raw = np.einsum("mj,mj->m", rel, d) / np.where(l2 > 0, l2, 1.0)
-        t = np.clip(t_raw, np.where(i == 0, -np.inf, 0.0), np.where(i == n - 1, np.inf, 1.0))
+        t = _clamp(t_raw, np.where(i == 0, -np.inf, 0.0), np.where(i == n - 1, np.inf, 1.0))
         diff = rel - t[:, None] * d
         dist2 = np.full((M, w), np.inf)
         dist2[m, k] = np.einsum("mj,mj->m", diff, diff)
