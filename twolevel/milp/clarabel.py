@@ -200,9 +200,9 @@ class FixedModeQP:
         if not ok:
             return Solution(Status.INFEASIBLE, None, float("nan"), 0.0,
                             info={"reason": "integer-only rows violated"})
-        A = sp.csc_matrix((data, self._pat.indices, self._pat.indptr), shape=self._pat.shape)
         P = self._P_c
         if self._solver is None:
+            A = sp.csc_matrix((data, self._pat.indices, self._pat.indptr), shape=self._pat.shape)
             st = clarabel.DefaultSettings()
             st.verbose = False
             st.presolve_enable = False
