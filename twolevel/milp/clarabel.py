@@ -14,6 +14,7 @@ clarabel is imported lazily.
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
@@ -39,6 +40,52 @@ def _status(s: object) -> Status:
     if name in ("MaxTime", "MaxIterations"):
         return Status.TIME_LIMIT
     return Status.ERROR
+
+
+def _hessian_parts(P: sp.spmatrix, cont: np.ndarray, ints: np.ndarray) -> tuple[sp.csr_matrix | None, sp.csc_matrix]:
+    """The parts of the Hessian ``P`` (upper triangle, or both) a fixed-mode QP needs: the block
+    coupling continuous and integer columns of the full symmetric matrix (None without integer
+    columns) and the upper triangle of the continuous block."""
+    Pf = (P + sp.triu(P, 1).T).tocsr()
+    ci = Pf[cont][:, ints] if ints.size else None
+    return ci, sp.triu(Pf[cont][:, cont]).tocsc()
+
+
+@dataclass(frozen=True, eq=False)
+class _HessianMoves:
+    """Where each stored entry of :func:`_hessian_parts` comes from in ``P.data``, for Hessians
+    with the same index arrays (the cost's weighed Hessian of each step has its shape's). Valid
+    when such a P stores its upper triangle once per entry (then each part's entry is one of P's,
+    moved) and no value is 0 (scipy's sum would drop it)."""
+
+    indices: np.ndarray
+    indptr: np.ndarray
+    shape: tuple[int, int]
+    ci: sp.csr_matrix | None  # the parts' patterns, with their entries' positions in P.data as data
+    c: sp.csc_matrix
+
+    @staticmethod
+    def of(P: sp.spmatrix, cont: np.ndarray, ints: np.ndarray) -> "_HessianMoves | None":
+        """The moves of ``P``'s pattern; None when it is not one the moves hold for."""
+        if not isinstance(P, sp.csc_matrix):
+            return None
+        probe = sp.csc_matrix((np.arange(1.0, P.indices.size + 1.0), P.indices, P.indptr), shape=P.shape)
+        cols = np.repeat(np.arange(P.shape[1]), np.diff(P.indptr))
+        if not probe.has_canonical_format or np.any(P.indices > cols):  # duplicates, or a lower entry: sums
+            return None
+        ci, c = _hessian_parts(probe, cont, ints)
+        return _HessianMoves(P.indices.copy(), P.indptr.copy(), P.shape, ci, c)
+
+    def parts(self, P: sp.spmatrix) -> tuple[sp.csr_matrix | None, sp.csc_matrix] | None:
+        """:func:`_hessian_parts` of ``P``, bit for bit, by moving its values; None when the moves
+        do not hold for it (other index arrays, a zero value)."""
+        if not isinstance(P, sp.csc_matrix) or P.shape != self.shape or not P.data.all() \
+                or not np.array_equal(P.indptr, self.indptr) or not np.array_equal(P.indices, self.indices):
+            return None
+        ci = None if self.ci is None else sp.csr_matrix(
+            (P.data[self.ci.data.astype(np.int64) - 1], self.ci.indices, self.ci.indptr), shape=self.ci.shape)
+        c = sp.csc_matrix((P.data[self.c.data.astype(np.int64) - 1], self.c.indices, self.c.indptr), shape=self.c.shape)
+        return ci, c
 
 
 class FixedModeQP:
@@ -104,6 +151,7 @@ class FixedModeQP:
                 self._guard[rws] = bcol
         self._solver = None
         self._P_c: sp.csc_matrix | None = None
+        self._moves: _HessianMoves | None = None
         self.setup_ms = 0.0
 
     @property
@@ -157,9 +205,11 @@ class FixedModeQP:
         if model.P is not self._P_src:  # the Hessian's parts, once per Hessian object
             self._P_src = model.P
             if model.P is not None:
-                Pf = (model.P + sp.triu(model.P, 1).T).tocsr()
-                self._Pf_ci = Pf[self.cont][:, self.ints] if self.ints.size else None
-                P_c = sp.triu(Pf[self.cont][:, self.cont]).tocsc()
+                moved = None if self._moves is None else self._moves.parts(model.P)
+                if moved is None:  # a new pattern: the sparse algebra, and the moves for the next Hessians
+                    moved = _hessian_parts(model.P, self.cont, self.ints)
+                    self._moves = _HessianMoves.of(model.P, self.cont, self.ints)
+                self._Pf_ci, P_c = moved
                 if self._P_c is not None and self._P_c.nnz == P_c.nnz and np.array_equal(
                         self._P_c.indices, P_c.indices) and np.array_equal(self._P_c.indptr, P_c.indptr):
                     self._P_c.data[:] = P_c.data  # same pattern: values only
