@@ -101,8 +101,8 @@ def _compiled(fn: Any) -> Any:
         gen = ca.CodeGenerator(stem + ".c")
         gen.add(fn)
         gen.generate(build + os.sep)
-        subprocess.run(["gcc", "-O2", "-ffp-contract=off", "-fPIC", "-shared", c_file, "-o", so_file, "-lm"], check=True,
-                       capture_output=True, start_new_session=True, timeout=600)
+        subprocess.run(["gcc", "-O2", "-ffp-contract=off", "-fPIC", "-shared", c_file, "-o", so_file, "-lm"],
+                       check=True, capture_output=True, start_new_session=True, timeout=600)
         return ca.external(fn.name(), so_file)
     finally:
         for path in (c_file, so_file):
@@ -193,7 +193,7 @@ def _simulate(x0: ArrayLike, controls: ArrayLike, dt: float, p: VehicleParams, b
     K, H, _ = u.shape
     if backend == "numpy":
         states = _simulate_numpy(x, u, dt, p, accel)
-    elif backend != "casadi-vm" and backend in ("auto", "casadi") and compiled_available():
+    elif backend in ("auto", "casadi") and compiled_available():
         states = _simulate_buffered(_batch_function(p, float(dt), H, K, accel, True, fused), x, u)
     elif backend in ("auto", "casadi", "casadi-vm"):
         f = _batch_function(p, float(dt), H, K, accel, False, fused)

@@ -408,7 +408,8 @@ def roll(x0: np.ndarray, plan: list[Manoeuvre], route: Route, s0: float, dt: flo
             if held.all():  # full braking throughout: γ = −1 (the inverse map's value is not read)
                 u[..., 1] = -1.0
             else:
-                u[..., 1] = np.where(held, -1.0, gamma_from_accel(np.where(in_clear, ca_col, -decel_col), v_pred, params))
+                a_k = np.where(in_clear, ca_col, -decel_col)
+                u[..., 1] = np.where(held, -1.0, gamma_from_accel(a_k, v_pred, params))
             # steering: curvature along the profile + Stanley's correction, faded out over a second;
             # the lateral path at the start (column 0: the errors) and along the profile (its curvature) at once
             e_path, slope, path_curv = _path_at(e_from, steps, np.concatenate([s[:, None], s_pred], axis=1))
