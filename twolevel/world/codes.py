@@ -51,5 +51,7 @@ YML434 = Code("YML434", "beyond-assumptions", W,
               "A participant is scripted beyond what the safety layer assumes of its kind; the simulation limits it.")
 YML435 = Code("YML435", "unknown-rule-margin", E,
               "controller.margins names a rule that none of the scenario's rule files defines.")
+YML436 = Code("YML436", "unknown-expected-rule", E,
+              "expect.rules names a rule that none of the scenario's rule files defines.")
 
 __all__ = [name for name in dir() if name.startswith("YML")]

@@ -20,10 +20,10 @@ from typing import Any, Iterable, Literal, Mapping
 
 from pydantic import BaseModel, ValidationError
 
-from twolevel.diagnostics import Diagnostic, Span
+from twolevel.diagnostics import Code, Diagnostic, Span
 from twolevel.world.codes import (
     YML410, YML411, YML412, YML413, YML414, YML415, YML416, YML417, YML418, YML419, YML420, YML421,
-    YML423, YML428, YML430, YML435,
+    YML423, YML428, YML430, YML435, YML436,
 )
 from twolevel.world.document import Document, Path_, read_document
 from twolevel.world.junction import plan_junctions
@@ -741,23 +741,28 @@ def _check_rule_names(rules: Iterable[RuleFile]) -> tuple[list[Diagnostic], dict
     return out, (defined if complete else None)
 
 
-def _check_margins(spec: ScenarioFile, doc: Document, defined: Mapping[str, Span] | None) -> list[Diagnostic]:
-    """YML435 at each key of ``controller.margins`` that names no rule of the scenario's rule
-    files (``defined``; not judged when one of them is missing or unparsable: its own
-    diagnostics come first)."""
-    margins = spec.controller.margins
-    if not margins or defined is None:
+def _check_rule_refs(spec: ScenarioFile, doc: Document, defined: Mapping[str, Span] | None) -> list[Diagnostic]:
+    """Each rule name the scenario refers to that no rule of its rule files (``defined``) has:
+    YML435 at a key of ``controller.margins``, YML436 at an entry of ``expect.rules`` (the
+    scenario's or a variant's) — there a run would only fail its criterion after it has run. Not
+    judged when one of the rule files is missing or unparsable: its own diagnostics come first."""
+    if defined is None:
         return []
+    refs: list[tuple[str, tuple[Any, ...], Code, str]] = [
+        (name, ("controller", "margins", name), YML435, "margin for rule") for name in spec.controller.margins or ()]
+    expects = [(("expect",), spec.expect)] + [(("variants", j, "expect"), v.expect) for j, v in enumerate(spec.variants)]
+    for at, expect in expects:
+        if expect is not None and expect.rules != "all":
+            refs += [(name, (*at, "rules", i), YML436, "expect.rules names rule") for i, name in enumerate(expect.rules)]
     out: list[Diagnostic] = []
     known = sorted(defined)
-    for name in margins:
+    rules = ", ".join(known) if known else "none (the scenario lists no rule file)"
+    for name, key, code, what in refs:
         if name in defined:
             continue
         close = _suggest(name, known)
-        rules = ", ".join(known) if known else "none (the scenario lists no rule file)"
-        out.append(YML435(f"margin for rule '{name}', which no rule file of the scenario defines"
-                          + (f" — {close}" if close else ""), doc.locate(("controller", "margins", name)),
-                          hint=f"rules defined: {rules}"))
+        out.append(code(f"{what} '{name}', which no rule file of the scenario defines" + (f" — {close}" if close else ""),
+                        doc.locate(key), hint=f"rules defined: {rules}"))
     return out
 
 
@@ -838,7 +843,7 @@ def load_scenario(path: str | os.PathLike[str], parameters: Mapping[str, float] 
             diags.append(YML418(f"rule file not found: {ref.file}", at, hint="paths are relative to the scenario file"))
         rules.append(RuleFile(str(target), tuple(sorted(ref.constants.items())), at))
     ndiags, defined = _check_rule_names(rules)
-    diags += ndiags + _check_margins(spec, doc, defined)
+    diags += ndiags + _check_rule_refs(spec, doc, defined)
     spec, tdiags = _traffic_files(spec, doc)
     diags += tdiags
     if m is None:
