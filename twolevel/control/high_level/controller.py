@@ -40,7 +40,7 @@ from twolevel.control.codes import MIL515
 from twolevel.control.high_level.backend import Backend, BackendCache
 from twolevel.control.high_level.fallback import fallback_plan
 from twolevel.control.high_level.overtaking import pass_lane
-from twolevel.control.high_level.guards import Pass
+from twolevel.control.high_level.guards import Pass, stop_lines_read
 from twolevel.control.high_level.linearisation import StepData, history_length, prepare_step
 from twolevel.control.high_level.problem import Assembled, StepRules, assemble
 from twolevel.control.high_level.robustness import plan_robustness
@@ -95,8 +95,7 @@ class HighLevelController:
         self.rules, diags = mpc_rules(rulesets, self.settings.dt)
         self.diagnostics: list[Diagnostic] = diags
         reads_all = set().union(*(r.reads for r in self.rules)) if self.rules else set()
-        self.stop_rules = ("d_stop" in reads_all, bool({"light_red", "d_light"} & reads_all),
-                           bool({"xwalk_busy", "d_xwalk"} & reads_all))
+        self.stop_rules = stop_lines_read(reads_all)
         self.gap = gap_rule(rulesets)
         self.templates = TemplateCache(capacity=4)
         self.carry = Carry()

@@ -55,8 +55,9 @@ from twolevel.world.assumptions import ResponseBounds, safe_distance
 from twolevel.world.signals import HorizonConstants
 from twolevel.world.world import World
 
-__all__ = ["stop_lines", "can_stop_slope", "TerminalStop", "terminal_stop", "drivable_band", "RssTerminal",
-           "rss_terminal", "free_sides", "beside_steps", "BESIDE_FROM", "Pass", "Front", "front_of", "chord", "CHORD_HALF_WIDTH"]
+__all__ = ["stop_lines", "stop_lines_read", "STOP_LINE_SIGNALS", "can_stop_slope", "TerminalStop", "terminal_stop",
+           "drivable_band", "RssTerminal", "rss_terminal", "free_sides", "beside_steps", "BESIDE_FROM", "Pass", "Front",
+           "front_of", "chord", "CHORD_HALF_WIDTH"]
 
 CHORD_HALF_WIDTH = 0.5
 """[m/s] w: half the width of the chord of RSS's distance around the linearisation's speed."""
@@ -68,6 +69,19 @@ controller carries them, :class:`Pass`): a pass cannot be
 put off from step to step (a "beside" that each plan may reach later can always be reached by a
 swerve in its coarse part, and the car drives on at the vehicle ahead). 2 s leave room for a
 lane change at the bicycle's lateral acceleration limit."""
+
+
+STOP_LINE_SIGNALS: tuple[frozenset[str], frozenset[str], frozenset[str]] = (
+    frozenset({"d_stop"}), frozenset({"light_red", "d_light"}), frozenset({"xwalk_busy", "d_xwalk"}))
+"""The signals whose rules make a line the plan stops at: a stop sign's, a red light's, a busy
+crosswalk's (:func:`stop_lines`' ``stop``, ``light`` and ``xwalk``)."""
+
+
+def stop_lines_read(reads: set[str] | frozenset[str]) -> tuple[bool, bool, bool]:
+    """Which lines a rule reading the signals ``reads`` makes the plan stop at: (stop sign, red
+    light, busy crosswalk), the flags of :func:`stop_lines`."""
+    stop, light, xwalk = (bool(names & reads) for names in STOP_LINE_SIGNALS)
+    return stop, light, xwalk
 
 
 def stop_lines(hc: HorizonConstants, *, stop: bool, light: bool, xwalk: bool = False) -> np.ndarray:

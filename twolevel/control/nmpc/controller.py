@@ -73,7 +73,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from twolevel.control.codes import MIL515, MIL530
-from twolevel.control.high_level.guards import stop_lines
+from twolevel.control.high_level.guards import stop_lines, stop_lines_read
 from twolevel.control.high_level.right_of_way import CLEAR_ACCEL, MPC_ZONE_PATTERNS, RUN_UP, gap_rule, give_way_line
 from twolevel.control.high_level.linearisation import StepData, prepare_step, sensing_bound
 from twolevel.control.high_level.settings import MPCSettings
@@ -164,12 +164,9 @@ class NmpcController:
                 used = False
                 if "v_max" in reads:
                     self.speed = used = True
-                if "d_stop" in reads:
-                    self.stop = used = True
-                if reads & {"light_red", "d_light"}:
-                    self.light = used = True
-                if reads & {"xwalk_busy", "d_xwalk"}:
-                    self.xwalk = used = True
+                stop, light, xwalk = stop_lines_read(reads)
+                self.stop, self.light, self.xwalk = self.stop or stop, self.light or light, self.xwalk or xwalk
+                used = used or stop or light or xwalk
                 if reads & ({"d_zone", "d_zone_out"} | MPC_ZONE_PATTERNS):
                     self.give_way = used = True
                 for c in _calls(f, "collision_free"):
