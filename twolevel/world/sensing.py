@@ -214,14 +214,16 @@ def _crosswalks(world: World, others: Others, x: np.ndarray, y: np.ndarray, s: n
                 ) -> tuple[np.ndarray, np.ndarray]:
     """``xwalk_busy`` and ``d_xwalk`` (K, T): the pedestrians among ``others`` present where they
     are within r_near and were when sensed (as for the neighbourhood's signals)."""
-    if world.crosswalks.n == 0 or others.n == 0:  # no pedestrian to see: busy 0, the lines' distances
-        none = np.zeros(s.shape + (0,))
-        return crosswalks_seen(world, s, v, np.zeros(0, int), none, none, none.astype(bool))
-    ox, oy = others.x.T[None], others.y.T[None]  # (1, T, n)
-    dist = np.hypot(ox - x[..., None], oy - y[..., None])
+    _, near = _sensed(world, others, x, y)
+    return crosswalks_seen(world, s, v, others.index, others.x.T[None], others.y.T[None], near)
+
+
+def _sensed(world: World, others: Others, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distances (K, T, n) [m] of ``others`` from the ego at ``x``, ``y`` (K, T) [m], and
+    where each is sensed: within r_near there, and at sample 0 (when sensed)."""
+    dist = np.hypot(others.x.T[None] - x[..., None], others.y.T[None] - y[..., None])
     r = world.settings.r_near
-    near = (dist <= r) & (dist[:, :1] <= r)
-    return crosswalks_seen(world, s, v, others.index, ox, oy, near)
+    return dist, (dist <= r) & (dist[:, :1] <= r)
 
 
 def _participants(world: World, others: Others, x: np.ndarray, y: np.ndarray, psi: np.ndarray, s: np.ndarray,
@@ -294,9 +296,7 @@ def _lead_and_gap(world: World, others: Others, x: np.ndarray, y: np.ndarray, ps
     if others.n == 0:
         return out
     st = world.settings
-    ox, oy = others.x.T[None], others.y.T[None]  # (1, T, n)
-    dist = np.hypot(ox - x[..., None], oy - y[..., None])  # (K, T, n)
-    near = (dist <= st.r_near) & (dist[:, :1] <= st.r_near)  # within r_near here, and when sensed
+    dist, near = _sensed(world, others, x, y)  # (K, T, n)
     out["n_near"] = near.sum(axis=-1).astype(float)
     route = world.route
     ahead, along = ahead_in_lane(route, others.s.T[None], others.e.T[None], others.psi.T[None], s[..., None],
