@@ -46,7 +46,8 @@ class ExtraColumns:
         self.ids: tuple[str, ...] = world.parts.ids if names else ()
         self.names = names
         self.demand: tuple[str, ...] = world.on_demand_signals
-        self.signals: tuple[str, ...] = self.demand + tuple(participant_key(n, pid) for pid in self.ids for n in names)
+        self._keys = tuple(participant_key(n, pid) for pid in self.ids for n in names)  # the participants' columns
+        self.signals: tuple[str, ...] = self.demand + self._keys
         self.columns: tuple[str, ...] = CRITICALITY_COLUMNS + self.signals
         self._absent = absent_sample(names)
         self._v: dict[str, float] = {}  # v(o) at the previous sample of each participant present there
@@ -72,7 +73,7 @@ class ExtraColumns:
             else:
                 now.update({participant_key(n, pid): value for n, value in self._absent.items()})
         self._v = seen
-        cells.update({key: now[key] for key in self.signals[len(self.demand):]})
+        cells.update({key: now[key] for key in self._keys})
         return cells
 
     def _criticality(self, now: Mapping[str, float], pose: tuple[float, float, float, float], others: Others
