@@ -42,7 +42,10 @@ RIGHT_OF_WAY = ("yield_priority_road", "left_turn_stream", "four_way_stop_crossi
 """The right-of-way scenarios (scenarios/traffic/), part of the suite."""
 CROSSWALKS = ("zebra", "zebra_walking", "crosswalk")
 """The crosswalk scenarios (scenarios/traffic/, rules/crosswalk.stl), part of the suite."""
-SUITE = tuple(sorted(p.stem for p in (ROOT / "scenarios" / "everyday").glob("*.yaml"))) + RIGHT_OF_WAY + CROSSWALKS
+MERGES = ("merge", "merge_sparse")
+"""The merges with no sign (scenarios/traffic/), part of the suite."""
+SUITE = (tuple(sorted(p.stem for p in (ROOT / "scenarios" / "everyday").glob("*.yaml"))) + RIGHT_OF_WAY + CROSSWALKS
+         + MERGES)
 #: Before the safety layer (main at fb74f82, the MPC and the NMPC with the paper's low level):
 #: goal time [s] of a route that stops at its goal, else the route position [m] at the end.
 BEFORE: dict[tuple[str, str], tuple[str, float]] = {
@@ -75,7 +78,7 @@ def _load() -> str:
 def _path(name: str) -> Path:
     if name.endswith(".yaml"):  # a scenario file given by its path
         return Path(name).resolve()
-    if name in RIGHT_OF_WAY + CROSSWALKS:
+    if name in RIGHT_OF_WAY + CROSSWALKS + MERGES:
         return ROOT / "scenarios" / "traffic" / f"{name}.yaml"
     return ROOT / "scenarios" / (f"{name}.yaml" if name in SCENARIOS else f"everyday/{name}.yaml")
 

@@ -20,6 +20,7 @@ import numpy as np
 from twolevel.control.high_level.crossers import crossing_halt
 from twolevel.control.high_level.guards import (BESIDE_FROM, Front, Pass, beside_steps,
                                                 drivable_band, free_sides, front_of, stop_lines)
+from twolevel.control.high_level.merges import merge_line
 from twolevel.control.high_level.neighbours import left_leader
 from twolevel.control.high_level.overtaking import (lateral_due, lateral_share, oncoming_band, oncoming_free, out_of_lane,
                                                     room_to_pull_out, waiting_room)
@@ -175,8 +176,9 @@ def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, set
     d_brake, v_brake = braking(float(x0[3]), settings.ticks[-1], dt, params)
     s_end = float(route.s[-1]) if stops else math.inf
     zones = zone_constants(world, hc, s0, settings.H, traffic, float(x0[3]), gap) if gap is not None else None
-    halts = [give_way_line(zones), crossing_halt(world, traffic, (float(x0[0]), float(x0[1])), s0, float(e_arr[0]),
-                                                 float(x0[3]))]
+    xy = (float(x0[0]), float(x0[1]))
+    halts = [give_way_line(zones), crossing_halt(world, traffic, xy, s0, float(e_arr[0]), float(x0[3])),
+             merge_line(world, traffic, xy, s0, float(x0[3]))]
     if any(stop_rules):
         lines = stop_lines(hc, stop=stop_rules[0], light=stop_rules[1], xwalk=stop_rules[2])
         halts.append(float(min(lines[0], lines[-1])))
