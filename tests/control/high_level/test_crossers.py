@@ -15,7 +15,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from twolevel.control.high_level.crossers import TIME_GAP, crossing_halt, time_to_cover
+from twolevel.control.high_level.crossers import TIME_GAP, crossing_halt, crosswalk_halt, time_to_cover
 from twolevel.sim.trace import read_run
 from twolevel.world.traffic.pedestrians import STOP_SHORT
 
@@ -108,3 +108,40 @@ def test_the_mpc_slows_early_for_the_walker_and_lets_it_cross(tmp_path: Path) ->
     assert on_lane.any()
     assert (front[on_lane] < X_WALK - 0.25).all()
     assert cols["s"][-1] > 230.0  # and drove on to the goal
+
+
+ZEBRA = ROOT / "scenarios" / "traffic" / "zebra.yaml"
+
+
+def test_the_crosswalk_rule_s_line_is_seen_from_the_sensing_range() -> None:
+    """The walker waits at the zebra; 80 m before its line the ego is beyond r_near (50 m) but
+    within the sensing range (100 m): the rule's own signal does not see the walker yet, the halt
+    does — at the same line the signal gives once within r_near."""
+    from twolevel.world.signals import crosswalks_seen
+
+    w = load_world(ZEBRA)
+    tr = w.traffic0
+    line = float(w.crosswalks.line[0])
+    s0 = line - 80.0
+    x0, y0 = (float(c) for c in w.route.position(np.array([s0]))[0])
+    halt = crosswalk_halt(w, tr, (x0, y0), s0, w.ego.v)
+    assert halt == pytest.approx(line)
+    everyone = np.arange(len(tr.x))
+    present = tr.active & (np.hypot(tr.x - x0, tr.y - y0) <= w.settings.r_near)
+    busy, _ = crosswalks_seen(w, np.array(s0), np.array(w.ego.v), everyone, tr.x, tr.y, present)
+    assert busy == 0.0  # beyond r_near for the rule
+    busy, d = crosswalks_seen(w, np.array(line - 40.0), np.array(w.ego.v), everyone, tr.x, tr.y, tr.active)
+    assert busy == 1.0 and line - 40.0 + d == pytest.approx(halt)  # within it: the same line
+    assert math.isinf(crosswalk_halt(w, replace(tr, active=np.zeros_like(tr.active)), (x0, y0), s0, w.ego.v))
+
+
+@pytest.mark.slow
+def test_the_mpc_stops_for_the_avenue_s_crosswalk_within_the_comfort_limit(tmp_path: Path) -> None:
+    """Regression: on scenarios/traffic/crosswalk.yaml (r_near 30 m) the waiting pedestrians came
+    into the rule's sight 26 m before the line at 13.9 m/s, and the ego braked at 4.4 m/s²; the one
+    stepping out without looking was met by the safety layer's 8.9 m/s². Now both within 4 m/s²,
+    every step the plan's."""
+    path = ROOT / "scenarios" / "traffic" / "crosswalk.yaml"
+    cols = read_run(judged_run(path, tmp_path / "run")).columns
+    assert (-np.diff(cols["v"]) / 0.1).max() <= 4.0
+    assert set(np.unique(cols["decision"])) == {"mpc"}

@@ -28,6 +28,12 @@ logic and right of way):
   its front stands :data:`~twolevel.world.traffic.pedestrians.STOP_SHORT` before s_c (the
   nearest over all who cross), +inf when none binds.
 
+At a marked crosswalk the rule decides (``rules/crosswalk.stl``), but it sees pedestrians only
+within ``r_near``, which may be shorter than the comfortable stopping distance.
+:func:`crosswalk_halt` is the rule's own busy crosswalk (:mod:`twolevel.world.crosswalks`) with
+the pedestrians sensed within the sensing range instead, so the reference stops for it from
+further away.
+
 Units: m, m/s, m/s², s.
 """
 
@@ -38,12 +44,13 @@ import math
 import numpy as np
 
 from twolevel.world.assumptions import CYCLIST, PEDESTRIAN
-from twolevel.world.signals import sensing_window
+from twolevel.world.crosswalks import YIELD_DECEL, crosswalk_signals, positions_of
+from twolevel.world.signals import PASS_MARGIN, sensing_window
 from twolevel.world.traffic import TrafficState
 from twolevel.world.traffic.pedestrians import STOP_SHORT
 from twolevel.world.world import World
 
-__all__ = ["CROSS_SPEED", "CROSS_SINE", "MARGIN", "TIME_GAP", "crossing_halt", "time_to_cover"]
+__all__ = ["CROSS_SPEED", "CROSS_SINE", "MARGIN", "TIME_GAP", "crossing_halt", "crosswalk_halt", "time_to_cover"]
 
 CROSS_SPEED = 0.3
 """[m/s] Slower sideways than this, a person is not crossing (standing, or walking along)."""
@@ -104,3 +111,18 @@ def crossing_halt(world: World, traffic: TrafficState, xy: tuple[float, float], 
     if not waits.any():
         return math.inf
     return float((s_c[waits] - STOP_SHORT - 0.5 * ego.length).min())
+
+
+def crosswalk_halt(world: World, traffic: TrafficState, xy: tuple[float, float], s0: float, v0: float) -> float:
+    """[m] The line of the nearest busy crosswalk on the route (``xwalk_busy``'s definition, with
+    the pedestrians active within the sensing range of the ego at ``xy`` [m] instead of
+    ``r_near``), for the ego at route position ``s0`` [m] and speed ``v0`` [m/s]; +inf when none
+    is busy."""
+    cw = world.crosswalks
+    if cw.n == 0:
+        return math.inf
+    idx = np.flatnonzero(traffic.active & (np.hypot(traffic.x - xy[0], traffic.y - xy[1]) <= world.settings.sensor_range))
+    at, here = positions_of(cw, idx, traffic.x[idx], traffic.y[idx], np.ones(len(idx), dtype=bool))
+    busy, d = crosswalk_signals(cw, np.array(s0), np.array(v0), at, here, r_near=world.settings.sensor_range,
+                                decel=YIELD_DECEL, pass_margin=PASS_MARGIN)
+    return s0 + float(d) if float(busy) > 0.5 else math.inf

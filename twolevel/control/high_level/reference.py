@@ -17,7 +17,7 @@ from typing import Sequence
 
 import numpy as np
 
-from twolevel.control.high_level.crossers import crossing_halt
+from twolevel.control.high_level.crossers import crossing_halt, crosswalk_halt
 from twolevel.control.high_level.guards import (BESIDE_FROM, Front, Pass, beside_steps,
                                                 drivable_band, free_sides, front_of, stop_lines)
 from twolevel.control.high_level.merges import merge_line
@@ -182,6 +182,8 @@ def reference(world: World, x0: np.ndarray, t: float, traffic: TrafficState, set
     if any(stop_rules):
         lines = stop_lines(hc, stop=stop_rules[0], light=stop_rules[1], xwalk=stop_rules[2])
         halts.append(float(min(lines[0], lines[-1])))
+    if stop_rules[2]:  # the crosswalk rule's line, its pedestrians seen from further than r_near
+        halts.append(crosswalk_halt(world, traffic, xy, s0, float(x0[3])))
     for s_halt in halts:
         if s0 + d_brake <= s_halt + 1e-6:
             s_end = min(s_end, max(s_halt - settings.stop_margin, s0))
