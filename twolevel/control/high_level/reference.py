@@ -6,7 +6,9 @@ forward over the horizon at the scenario's comfort acceleration and deceleration
 the solve-time constants of :func:`twolevel.world.signals.horizon_constants`. The reference ends with a stop
 where the plan must stop — the goal, when the route stops there, and a stop line or red light a
 rule guards (:func:`twolevel.control.high_level.guards.stop_lines`) that full braking can still
-stop before. Units: m, rad, m/s, s.
+stop before — and where it waits: for a pedestrian or cyclist crossing ahead and at a guarded
+crosswalk seen from the sensing range (:mod:`~twolevel.control.high_level.crossers`), before a
+merge with no sign (:mod:`~twolevel.control.high_level.merges`). Units: m, rad, m/s, s.
 """
 
 from __future__ import annotations
