@@ -153,13 +153,15 @@ def _light(world: World, t: np.ndarray, s: np.ndarray, v: np.ndarray) -> tuple[n
 
 
 def crosswalks_seen(world: World, s: np.ndarray, v: np.ndarray, index: np.ndarray, x: np.ndarray, y: np.ndarray,
-                    present: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                    present: np.ndarray, *, reach: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``xwalk_busy`` and ``d_xwalk`` (shape S) for an ego at route positions ``s`` [m] with speeds
     ``v`` [m/s] (shape S) among participants ``index`` (n,) at ``x``, ``y`` [m] (S + (n,)),
-    ``present`` (S + (n,)) where active and within r_near (:mod:`twolevel.world.crosswalks`)."""
+    ``present`` (S + (n,)) where active and within r_near (:mod:`twolevel.world.crosswalks`);
+    ``reach`` [m]: how far ahead a crosswalk applies (None: r_near, the signals' definition)."""
     cw = world.crosswalks
     xy, here = positions_of(cw, np.asarray(index), x, y, present)
-    return crosswalk_signals(cw, s, v, xy, here, r_near=world.settings.r_near, decel=YIELD_DECEL, pass_margin=PASS_MARGIN)
+    return crosswalk_signals(cw, s, v, xy, here, r_near=world.settings.r_near if reach is None else reach,
+                             decel=YIELD_DECEL, pass_margin=PASS_MARGIN)
 
 
 def sensing_window(world: World) -> float:

@@ -1,7 +1,7 @@
 """The reference waits for pedestrians and cyclists crossing the ego's lane ahead
 (:mod:`twolevel.control.high_level.crossers`): the wait on the shipped pedestrian_crossing world
-and where it does not apply, ``time_to_cover`` against stepping the motion, and in closed loop the
-regression it fixes — the walker 43 m ahead was first planned for by the safety layer's braking
+and where it does not apply, the ego's ramp (``time_to_travel``) against stepping the motion, and
+in closed loop the regression it fixes — the walker 43 m ahead was first planned for by the safety layer's braking
 at 9 m/s²."""
 
 from __future__ import annotations
@@ -15,7 +15,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from twolevel.control.high_level.crossers import TIME_GAP, crossing_halt, crosswalk_halt, time_to_cover
+from twolevel.control.high_level.crossers import TIME_GAP, crossing_halt, crosswalk_halt
+from twolevel.safety.occupancy import time_to_travel
 from twolevel.sim.trace import read_run
 from twolevel.world.traffic.pedestrians import STOP_SHORT
 
@@ -77,9 +78,12 @@ def test_a_standing_ego_waits_for_a_walker_still_on_its_lane_and_goes_once_it_is
 
 
 @given(d=st.floats(0.0, 500.0), v0=st.just(0.0) | st.floats(1e-3, 30.0), accel=st.floats(0.5, 4.0), gain=st.just(0.0) | st.floats(1e-3, 20.0))
-def test_time_to_cover_agrees_with_stepping_the_motion(d: float, v0: float, accel: float, gain: float) -> None:
+def test_time_to_travel_without_an_engine_limit_agrees_with_stepping_the_motion(d: float, v0: float, accel: float,
+                                                                                gain: float) -> None:
+    """The ego's ramp the waits use: time_to_travel with no switching speed (v_sw = +inf)."""
     v_top = v0 + gain
-    t = float(time_to_cover(np.array([d]), v0, accel, v_top)[0])
+    one = lambda x: np.array([x], dtype=float)  # noqa: E731
+    t = float(time_to_travel(one(v0), one(v_top), one(accel), one(np.inf), one(d))[0])
     if v_top == 0.0:
         assert (t == 0.0) if d == 0.0 else math.isinf(t)
         return

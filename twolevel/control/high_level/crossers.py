@@ -43,14 +43,14 @@ import math
 
 import numpy as np
 
+from twolevel.safety.occupancy import time_to_travel
 from twolevel.world.assumptions import CYCLIST, PEDESTRIAN
-from twolevel.world.crosswalks import YIELD_DECEL, crosswalk_signals, positions_of
-from twolevel.world.signals import PASS_MARGIN, sensing_window
+from twolevel.world.signals import crosswalks_seen, sensing_window
 from twolevel.world.traffic import TrafficState
 from twolevel.world.traffic.pedestrians import STOP_SHORT
 from twolevel.world.world import World
 
-__all__ = ["CROSS_SPEED", "CROSS_SINE", "MARGIN", "TIME_GAP", "crossing_halt", "crosswalk_halt", "time_to_cover"]
+__all__ = ["CROSS_SPEED", "CROSS_SINE", "MARGIN", "TIME_GAP", "crossing_halt", "crosswalk_halt"]
 
 CROSS_SPEED = 0.3
 """[m/s] Slower sideways than this, a person is not crossing (standing, or walking along)."""
@@ -60,19 +60,6 @@ MARGIN = 0.5
 """[m] Kept to a crossing person, beside and before/behind the ego's body."""
 TIME_GAP = 1.5
 """[s] Kept between the ego and a crossing person at the point they share."""
-
-
-def time_to_cover(d: np.ndarray, v0: float, accel: float, v_top: float) -> np.ndarray:
-    """[s] Time to cover ``d`` [m] (≤ 0: none) from ``v0`` [m/s], accelerating at ``accel``
-    [m/s²] up to ``v_top`` [m/s] and then holding it (+inf where it never gets there)."""
-    d = np.maximum(np.asarray(d, dtype=float), 0.0)
-    v0 = max(v0, 0.0)
-    v_top = max(v_top, v0)
-    ramp = (v_top * v_top - v0 * v0) / (2.0 * accel)  # distance to reach v_top
-    t_ramp = (np.sqrt(v0 * v0 + 2.0 * accel * np.minimum(d, ramp)) - v0) / accel
-    with np.errstate(divide="ignore", over="ignore"):
-        t_hold = np.where(d > ramp, (d - ramp) / v_top if v_top > 0 else np.inf, 0.0)
-    return t_ramp + t_hold
 
 
 def crossing_halt(world: World, traffic: TrafficState, xy: tuple[float, float], s0: float, e0: float,
@@ -102,10 +89,12 @@ def crossing_halt(world: World, traffic: TrafficState, xy: tuple[float, float], 
     t_in = np.maximum((np.where(e_dot > 0, lo, hi) - e) / e_dot, 0.0)
     t_out = (np.where(e_dot > 0, hi, lo) - e) / e_dot
     s_c = s + np.minimum(s_dot * t_in, s_dot * t_out) - radius  # where it enters the band, or leaves it nearer
-    comfort = world.settings.comfort
-    v_top = float(route.desired_speed_at(s0))
-    clear = time_to_cover(s_c + 2.0 * radius + MARGIN + 0.5 * ego.length - s0, v0, comfort.accel, v_top)
-    arrive = time_to_cover(s_c - MARGIN - 0.5 * ego.length - s0, v0, comfort.accel, v_top)
+    n = len(idx)  # the ego accelerating at comfort up to its desired speed (no engine limit)
+    v = np.full(n, max(v0, 0.0))
+    ramp = (v, np.maximum(v, float(route.desired_speed_at(s0))), np.full(n, world.settings.comfort.accel),
+            np.full(n, np.inf))
+    clear = time_to_travel(*ramp, np.maximum(s_c + 2.0 * radius + MARGIN + 0.5 * ego.length - s0, 0.0))
+    arrive = time_to_travel(*ramp, np.maximum(s_c - MARGIN - 0.5 * ego.length - s0, 0.0))
     waits = ((t_out > 0) & (s_c > s0 + 0.5 * ego.length)  # crossing ahead of the ego's front
              & (clear + TIME_GAP > t_in) & (arrive < t_out + TIME_GAP))  # neither goes first
     if not waits.any():
@@ -118,11 +107,9 @@ def crosswalk_halt(world: World, traffic: TrafficState, xy: tuple[float, float],
     the pedestrians active within the sensing range of the ego at ``xy`` [m] instead of
     ``r_near``), for the ego at route position ``s0`` [m] and speed ``v0`` [m/s]; +inf when none
     is busy."""
-    cw = world.crosswalks
-    if cw.n == 0:
+    if world.crosswalks.n == 0:
         return math.inf
     idx = np.flatnonzero(traffic.active & (np.hypot(traffic.x - xy[0], traffic.y - xy[1]) <= world.settings.sensor_range))
-    at, here = positions_of(cw, idx, traffic.x[idx], traffic.y[idx], np.ones(len(idx), dtype=bool))
-    busy, d = crosswalk_signals(cw, np.array(s0), np.array(v0), at, here, r_near=world.settings.sensor_range,
-                                decel=YIELD_DECEL, pass_margin=PASS_MARGIN)
+    busy, d = crosswalks_seen(world, np.array(s0), np.array(v0), idx, traffic.x[idx], traffic.y[idx],
+                              np.ones(len(idx), dtype=bool), reach=world.settings.sensor_range)
     return s0 + float(d) if float(busy) > 0.5 else math.inf
